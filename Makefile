@@ -1,0 +1,29 @@
+# Two commands on a fresh machine: `make demo` and `make test` (DESIGN.md §3.1).
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test bench lint clean
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[dev]"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/jaxvs demo --out demo-report
+
+test: $(STAMP)
+	$(PY) -m pytest -n 2 --dist loadgroup tests
+	$(PY) -m pytest --nbmake notebooks -p no:randomly -o filterwarnings=
+
+bench: $(STAMP)
+	for b in benchmarks/*.py; do $(PY) $$b || exit 1; done
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check jaxvs tests benchmarks
+
+clean:
+	rm -rf $(VENV) demo-report .pytest_cache

@@ -1,0 +1,724 @@
+"""Reading and writing `Record`s: CSV, NPZ, MAT and HDF5, plus the EMPS benchmark files.
+
+Conventions shared by every format (DESIGN.md §3.2):
+
+- one experiment per file, signals as 1-D columns, the time vector (default name `t`) in
+  seconds;
+- loaders only read: the user's file is opened read-only and never modified;
+- writers store units and metadata so that `load(save_xxx(record))` gives the same record.
+  Metadata are written as JSON, so they must be JSON-serialisable (NumPy scalars and arrays
+  are converted to numbers and lists).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._record import DEFAULT_TIME_RTOL, Record
+
+SUPPORTED_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
+
+# Names under which the writers store units and metadata as JSON text.
+_UNITS_KEY = "jaxvs_units"
+_METADATA_KEY = "jaxvs_metadata"
+_CSV_METADATA_PREFIX = "# metadata:"
+_HEADER = re.compile(r"^\s*(?P<name>[^\[\]]*?)\s*(?:\[(?P<unit>[^\[\]]*)\])?\s*$")
+
+PathLike = str | os.PathLike[str]
+
+
+# --- helpers ---------------------------------------------------------------------------------
+
+
+def _existing_file(path: PathLike) -> Path:
+    file = Path(path)
+    if not file.exists():
+        raise FileNotFoundError(f"No such file: {str(file)!r}.")
+    if not file.is_file():
+        raise ValueError(f"{str(file)!r} is not a file.")
+    return file
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(
+        f"Metadata value {value!r} of type {type(value).__name__} cannot be written; writers "
+        "store metadata as JSON (numbers, strings, booleans, None, lists, dicts, NumPy arrays)."
+    )
+
+
+def _metadata_json(record: Record) -> str:
+    return json.dumps(dict(record.metadata), default=_json_default, allow_nan=True)
+
+
+def _names_list(names: Iterable[str] | str | None) -> list[str] | None:
+    if names is None:
+        return None
+    if isinstance(names, str):
+        return [names]
+    return list(names)
+
+
+def _build(
+    columns: Mapping[str, np.ndarray],
+    *,
+    time: str,
+    dt: float | None,
+    names: Sequence[str] | None,
+    units: Mapping[str, str],
+    metadata: Mapping[str, Any],
+    source: str,
+    found: Iterable[str],
+    time_rtol: float,
+) -> Record:
+    """Assemble a `Record` from equal-length 1-D `columns`, one of which may be the time."""
+    if time in columns and dt is not None:
+        raise ValueError(
+            f"{source} has a time column {time!r} and dt={dt!r} was given; pass only one of them "
+            "(dt is for files without a time column)."
+        )
+    if time not in columns and dt is None:
+        raise ValueError(
+            f"{source} has no time column {time!r}; columns found: {sorted(found)}. Name the "
+            f"time column 't' (seconds), pass time='<column name>', or pass dt=<sampling "
+            "period in s> for a file without time."
+        )
+    signals = {name: values for name, values in columns.items() if name != time}
+    if names is not None:
+        missing = [name for name in names if name not in signals]
+        if missing:
+            raise KeyError(
+                f"{source} has no signal {', '.join(map(repr, missing))}; available signals: "
+                f"{sorted(signals)}."
+            )
+        signals = {name: signals[name] for name in names}
+    if not signals:
+        raise ValueError(f"{source} holds no signal besides the time column {time!r}.")
+    kept_units = {name: unit for name, unit in units.items() if name in signals and unit}
+    if time in columns:
+        return Record(
+            signals, t=columns[time], units=kept_units, metadata=metadata, time_rtol=time_rtol
+        )
+    return Record(signals, dt=dt, units=kept_units, metadata=metadata)
+
+
+def _as_column(value: np.ndarray) -> np.ndarray | None:
+    """`value` as a 1-D numeric column, or `None` when it is not one."""
+    if not (
+        np.issubdtype(value.dtype, np.number) or np.issubdtype(value.dtype, np.bool_)
+    ) or np.iscomplexobj(value):
+        return None
+    if value.ndim == 1 and value.shape[0] > 1:
+        return value
+    if value.ndim == 2 and 1 in value.shape and value.size > 1:
+        return value.reshape(-1)
+    return None
+
+
+def _scalar(value: np.ndarray) -> Any:
+    """A size-1 numeric array or a string array as a Python scalar, else `None`."""
+    if value.dtype.kind in "US" and value.size == 1:
+        item = value.reshape(-1)[0]
+        return item.decode() if isinstance(item, bytes) else str(item)
+    if value.size == 1 and (
+        np.issubdtype(value.dtype, np.number) or np.issubdtype(value.dtype, np.bool_)
+    ):
+        return value.reshape(-1)[0].item()
+    return None
+
+
+def _split_variables(
+    variables: Mapping[str, np.ndarray], *, time: str
+) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Sort named arrays into signal columns (the length of the time vector) and metadata."""
+    columns_1d = {name: col for name, v in variables.items() if (col := _as_column(v)) is not None}
+    if time in columns_1d:
+        n = columns_1d[time].shape[0]
+    else:
+        lengths = [col.shape[0] for col in columns_1d.values()]
+        # Without a time vector, the signals are the columns of the most common length.
+        n = max(set(lengths), key=lengths.count) if lengths else -1
+    columns: dict[str, np.ndarray] = {}
+    metadata: dict[str, Any] = {}
+    for name, value in variables.items():
+        column = columns_1d.get(name)
+        if column is not None and column.shape[0] == n:
+            columns[name] = column
+            continue
+        scalar = _scalar(value)
+        if scalar is not None:
+            metadata[name] = scalar
+        else:
+            other = np.array(value, copy=True)
+            other.setflags(write=False)
+            metadata[name] = other
+    return columns, metadata
+
+
+def _decode_json(text: Any, what: str, source: str) -> Any:
+    if isinstance(text, np.ndarray):
+        text = _scalar(text)
+    if isinstance(text, bytes):
+        text = text.decode()
+    try:
+        return json.loads(str(text))
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{source}: the stored {what} are not valid JSON ({error}).") from None
+
+
+# --- dispatch --------------------------------------------------------------------------------
+
+
+def _is_emps(variables: Iterable[str]) -> bool:
+    return {"qm", "qg", "vir"} <= set(variables)
+
+
+def load(
+    path: PathLike,
+    *,
+    names: Iterable[str] | str | None = None,
+    time: str = "t",
+    dt: float | None = None,
+    time_rtol: float = DEFAULT_TIME_RTOL,
+) -> Record:
+    """Load one experiment from a CSV, NPZ, MAT or HDF5 file, chosen by the file suffix.
+
+    A MAT file with the EMPS variables `qm`, `qg` and `vir` is read by `load_emps`, which
+    maps them to the canonical names `q`, `r`, `u`.
+
+    **Arguments:**
+
+    - `path`: the file (`.csv`, `.npz`, `.mat`, `.h5` or `.hdf5`); it is only read.
+    - `names`: the signals to keep (default: all).
+    - `time`: name of the time column [s] (ignored for EMPS files, whose time is `t`).
+    - `dt`: sampling period [s] for files without a time column (then `t0 = 0`).
+    - `time_rtol`: tolerance of the uniform-time check, relative to the sampling period.
+
+    **Returns:**
+
+    A `Record`.
+
+    **Raises:**
+
+    `FileNotFoundError`; `ValueError` for an unsupported suffix, a missing time column, a
+    non-numeric cell or a non-uniform time vector; `KeyError` for a requested signal that
+    the file does not hold.
+    """
+    file = _existing_file(path)
+    suffix = file.suffix.lower()
+    options = dict(names=names, time=time, dt=dt, time_rtol=time_rtol)
+    if suffix == ".csv":
+        return load_csv(file, **options)  # type: ignore[arg-type]
+    if suffix == ".npz":
+        return load_npz(file, **options)  # type: ignore[arg-type]
+    if suffix == ".mat":
+        import scipy.io
+
+        if _is_emps(name for name, *_ in scipy.io.whosmat(file)):
+            record = load_emps(file, time_rtol=time_rtol)
+            return record if names is None else record.select(_names_list(names) or [])
+        return load_mat(file, **options)  # type: ignore[arg-type]
+    if suffix in (".h5", ".hdf5"):
+        return load_hdf5(file, **options)  # type: ignore[arg-type]
+    raise ValueError(
+        f"Unsupported file type {file.suffix!r} for {str(file)!r}; supported suffixes: "
+        f"{', '.join(SUPPORTED_SUFFIXES)}."
+    )
+
+
+# --- CSV -------------------------------------------------------------------------------------
+
+
+def load_csv(
+    path: PathLike,
+    *,
+    names: Iterable[str] | str | None = None,
+    time: str = "t",
+    dt: float | None = None,
+    delimiter: str = ",",
+    time_rtol: float = DEFAULT_TIME_RTOL,
+) -> Record:
+    """Load a CSV file with a header row: one column per signal, time column `t` [s].
+
+    A header cell may carry a unit, `name [unit]` (e.g. `q [m]`); the time column may be
+    written `t [s]`. Lines starting with `#` before the header are comments; a comment
+    `# metadata: {...}` (JSON, as written by `save_csv`) becomes the record's metadata.
+    Every other cell must be a number (`nan`/`inf` are parsed and then rejected by `Record`).
+
+    **Arguments:** as `load`, plus `delimiter` (default `,`).
+
+    **Returns:**
+
+    A `Record`.
+
+    **Raises:**
+
+    `ValueError` naming the row and column of a non-numeric cell, a row with the wrong
+    number of cells, duplicate or empty column names, a time unit other than seconds, or
+    a missing time column (listing the columns found).
+    """
+    file = _existing_file(path)
+    source = f"CSV file {str(file)!r}"
+    metadata: dict[str, Any] = {}
+    with open(file, newline="", encoding="utf-8-sig") as handle:
+        lines = handle.read().splitlines()
+    # Leading blank and comment lines are read as raw text: JSON metadata holds commas and
+    # quotes that a CSV reader would split.
+    first = 0
+    while first < len(lines) and (not lines[first].strip() or lines[first].lstrip()[:1] == "#"):
+        text = lines[first].strip()
+        if text.startswith(_CSV_METADATA_PREFIX):
+            metadata.update(_decode_json(text[len(_CSV_METADATA_PREFIX) :], "metadata", source))
+        first += 1
+    rows = csv.reader(lines[first:], delimiter=delimiter)
+    header = next(rows, None)
+    if header is None:
+        raise ValueError(f"{source} is empty; it needs a header row such as 't,q,u'.")
+    column_names: list[str] = []
+    units: dict[str, str] = {}
+    for i, cell in enumerate(header):
+        match = _HEADER.match(cell)
+        name = match.group("name") if match else ""
+        if not match or not name:
+            raise ValueError(
+                f"{source}, line {first + 1}: header cell {i + 1} ({cell!r}) is not "
+                "'name' or 'name [unit]'."
+            )
+        if name in column_names:
+            raise ValueError(f"{source}: column name {name!r} appears twice in the header.")
+        column_names.append(name)
+        if match.group("unit"):
+            units[name] = match.group("unit").strip()
+    values: list[list[float]] = []
+    for row in rows:
+        line = first + rows.line_num
+        if not row or not "".join(row).strip():
+            continue
+        if len(row) != len(column_names):
+            raise ValueError(
+                f"{source}, line {line}: {len(row)} cells but the header has "
+                f"{len(column_names)} columns."
+            )
+        parsed = []
+        for name, cell in zip(column_names, row):
+            try:
+                parsed.append(float(cell))
+            except ValueError:
+                raise ValueError(
+                    f"{source}, line {line}, column {name!r}: cell {cell!r} is not a number. "
+                    "Every cell below the header must be numeric."
+                ) from None
+        values.append(parsed)
+    if not values:
+        raise ValueError(f"{source} has a header but no data rows.")
+    if time in units and units[time] != "s":
+        raise ValueError(
+            f"{source}: the time column is in {units[time]!r}; jaxvs expects seconds. Convert "
+            f"it and write the header as '{time} [s]' or '{time}'."
+        )
+    units.pop(time, None)
+    table = np.asarray(values, dtype=np.float64)
+    columns = {name: table[:, i] for i, name in enumerate(column_names)}
+    return _build(
+        columns,
+        time=time,
+        dt=dt,
+        names=_names_list(names),
+        units=units,
+        metadata=metadata,
+        source=source,
+        found=column_names,
+        time_rtol=time_rtol,
+    )
+
+
+def save_csv(record: Record, path: PathLike) -> Path:
+    """Write `record` as CSV: metadata as a `# metadata: {json}` comment, a header
+    `t [s],name [unit],...`, then one row per sample with full float precision.
+
+    **Returns:**
+
+    The path written.
+    """
+    file = Path(path)
+    header = ["t [s]"] + [
+        f"{name} [{record.units[name]}]" if name in record.units else name for name in record.names
+    ]
+    for name in record.names:
+        if any(char in name for char in '[],\n\r"#'):
+            raise ValueError(
+                f"Signal name {name!r} cannot be written to a CSV header; rename it without "
+                "brackets, commas, quotes or '#'."
+            )
+    table = np.column_stack([record.t, record.to_array()])
+    with open(file, "w", newline="", encoding="utf-8") as handle:
+        if record.metadata:
+            handle.write(f"{_CSV_METADATA_PREFIX} {_metadata_json(record)}\n")
+        writer = csv.writer(handle)
+        writer.writerow(header)
+        for row in table:
+            writer.writerow([repr(float(value)) for value in row])
+    return file
+
+
+# --- NPZ -------------------------------------------------------------------------------------
+
+
+def load_npz(
+    path: PathLike,
+    *,
+    names: Iterable[str] | str | None = None,
+    time: str = "t",
+    dt: float | None = None,
+    time_rtol: float = DEFAULT_TIME_RTOL,
+) -> Record:
+    """Load a NumPy `.npz` archive: 1-D arrays (or `[n, 1]` columns) with the length of the
+    time array are signals; size-1 arrays and strings go to metadata as Python scalars;
+    other arrays go to metadata as read-only arrays. Units and metadata written by
+    `save_npz` are restored. Pickled objects are refused.
+
+    **Arguments:** as `load`.
+
+    **Returns:**
+
+    A `Record`.
+    """
+    file = _existing_file(path)
+    source = f"NPZ file {str(file)!r}"
+    with np.load(file, allow_pickle=False) as archive:
+        variables = {key: archive[key] for key in archive.files}
+    return _from_variables(
+        variables, time=time, dt=dt, names=names, source=source, time_rtol=time_rtol
+    )
+
+
+def _from_variables(
+    variables: dict[str, np.ndarray],
+    *,
+    time: str,
+    dt: float | None,
+    names: Iterable[str] | str | None,
+    source: str,
+    time_rtol: float,
+) -> Record:
+    units: dict[str, str] = {}
+    stored_metadata: dict[str, Any] | None = None
+    if _UNITS_KEY in variables:
+        units = _decode_json(variables.pop(_UNITS_KEY), "units", source)
+    if _METADATA_KEY in variables:
+        stored_metadata = _decode_json(variables.pop(_METADATA_KEY), "metadata", source)
+    columns, metadata = _split_variables(variables, time=time)
+    if stored_metadata is not None:
+        metadata = {**metadata, **stored_metadata}
+    return _build(
+        columns,
+        time=time,
+        dt=dt,
+        names=_names_list(names),
+        units=units,
+        metadata=metadata,
+        source=source,
+        found=variables,
+        time_rtol=time_rtol,
+    )
+
+
+def save_npz(record: Record, path: PathLike) -> Path:
+    """Write `record` as an uncompressed `.npz`: one array per signal, `t` [s], and units
+    and metadata as JSON strings (`jaxvs_units`, `jaxvs_metadata`).
+
+    **Returns:**
+
+    The path written (NumPy appends `.npz` when missing).
+    """
+    file = Path(path)
+    if file.suffix != ".npz":
+        file = file.with_name(file.name + ".npz")
+    _check_writable_names(record, reserved=("t", _UNITS_KEY, _METADATA_KEY))
+    arrays = {name: np.asarray(record[name]) for name in record.names}
+    np.savez(
+        file,
+        t=record.t,
+        **arrays,
+        **{_UNITS_KEY: np.array(json.dumps(record.units))},
+        **{_METADATA_KEY: np.array(_metadata_json(record))},
+    )
+    return file
+
+
+def _check_writable_names(record: Record, reserved: Sequence[str]) -> None:
+    for name in record.names:
+        if name in reserved:
+            raise ValueError(
+                f"Signal name {name!r} is reserved in jaxvs files ({', '.join(reserved)}); "
+                "rename it first with record.rename({...})."
+            )
+
+
+# --- MAT -------------------------------------------------------------------------------------
+
+
+def _read_mat(file: Path) -> dict[str, np.ndarray]:
+    import scipy.io
+
+    try:
+        content = scipy.io.loadmat(file, squeeze_me=False, mat_dtype=False)
+    except NotImplementedError:
+        raise ValueError(
+            f"{str(file)!r} is a MATLAB v7.3 file, which is HDF5 inside; load it with "
+            "load_hdf5 (or save it in MATLAB with -v7)."
+        ) from None
+    return {key: value for key, value in content.items() if not key.startswith("__")}
+
+
+def load_mat(
+    path: PathLike,
+    *,
+    names: Iterable[str] | str | None = None,
+    time: str = "t",
+    dt: float | None = None,
+    time_rtol: float = DEFAULT_TIME_RTOL,
+) -> Record:
+    """Load a MATLAB v5/v7 `.mat` file (`scipy.io.loadmat`).
+
+    Column or row vectors with the length of the time vector are signals (squeezed to 1-D);
+    scalar variables and strings go to metadata as Python scalars; other variables
+    (matrices, structs, cells) go to metadata unchanged. Units and metadata written by
+    `save_mat` are restored. Use `load_emps` (or `load`) for the EMPS benchmark files.
+
+    **Arguments:** as `load`.
+
+    **Returns:**
+
+    A `Record`.
+    """
+    file = _existing_file(path)
+    variables = _read_mat(file)
+    return _from_variables(
+        variables,
+        time=time,
+        dt=dt,
+        names=names,
+        source=f"MAT file {str(file)!r}",
+        time_rtol=time_rtol,
+    )
+
+
+def save_mat(record: Record, path: PathLike) -> Path:
+    """Write `record` as a MATLAB v5 `.mat` file: one column vector per signal, `t` [s],
+    and units and metadata as JSON strings (`jaxvs_units`, `jaxvs_metadata`).
+
+    **Returns:**
+
+    The path written.
+    """
+    import scipy.io
+
+    file = Path(path)
+    _check_writable_names(record, reserved=("t", _UNITS_KEY, _METADATA_KEY))
+    for name in record.names:
+        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]{0,62}", name):
+            raise ValueError(
+                f"Signal name {name!r} is not a valid MATLAB variable name (letter first, then "
+                "letters, digits, underscores); rename it first."
+            )
+    content: dict[str, Any] = {"t": record.t[:, None]}
+    content.update({name: np.asarray(record[name])[:, None] for name in record.names})
+    content[_UNITS_KEY] = json.dumps(record.units)
+    content[_METADATA_KEY] = _metadata_json(record)
+    scipy.io.savemat(file, content, format="5", do_compression=False, oned_as="column")
+    return file
+
+
+# --- HDF5 ------------------------------------------------------------------------------------
+
+
+def _attr_value(value: Any) -> Any:
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, np.ndarray):
+        scalar = _scalar(value)
+        if scalar is not None:
+            return scalar
+        value = np.array(value, copy=True)
+        value.setflags(write=False)
+        return value
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def load_hdf5(
+    path: PathLike,
+    *,
+    names: Iterable[str] | str | None = None,
+    time: str = "t",
+    dt: float | None = None,
+    time_rtol: float = DEFAULT_TIME_RTOL,
+) -> Record:
+    """Load an HDF5 file (`h5py`, opened read-only).
+
+    Every dataset in the file is visited (a dataset in a group is named by its path without
+    the leading `/`, e.g. `axis_x/q`). Datasets with the length of the time dataset are
+    signals, with the unit from their `unit` (or `units`) attribute; scalar datasets and the
+    root group's attributes go to metadata; other datasets go to metadata as read-only
+    arrays. The metadata written by `save_hdf5` (attribute `jaxvs_metadata`) are restored.
+
+    **Arguments:** as `load`.
+
+    **Returns:**
+
+    A `Record`.
+    """
+    import h5py
+
+    file = _existing_file(path)
+    source = f"HDF5 file {str(file)!r}"
+    variables: dict[str, np.ndarray] = {}
+    units: dict[str, str] = {}
+    metadata: dict[str, Any] = {}
+    try:
+        handle = h5py.File(file, "r")
+    except OSError as error:
+        raise ValueError(f"{source} cannot be read as HDF5 ({error}).") from None
+    with handle:
+
+        def visit(name: str, item: Any) -> None:
+            if not isinstance(item, h5py.Dataset):
+                return
+            if item.dtype.kind in "SO" and item.shape == ():
+                value = item.asstr()[()] if item.dtype.kind == "O" else item[()].decode()
+                variables[name] = np.array(value)
+            elif item.dtype.kind in "biuf":
+                variables[name] = np.asarray(item[()])
+            else:
+                metadata[name] = _attr_value(item[()])
+            unit = item.attrs.get("unit", item.attrs.get("units"))
+            if unit is not None:
+                units[name] = str(_attr_value(unit))
+
+        handle.visititems(visit)
+        attributes = {key: _attr_value(value) for key, value in handle.attrs.items()}
+    stored = attributes.pop(_METADATA_KEY, None)
+    columns, found_metadata = _split_variables(variables, time=time)
+    metadata = {**metadata, **found_metadata, **attributes}
+    if stored is not None:
+        metadata.update(_decode_json(stored, "metadata", source))
+    units.pop(time, None)
+    return _build(
+        columns,
+        time=time,
+        dt=dt,
+        names=_names_list(names),
+        units=units,
+        metadata=metadata,
+        source=source,
+        found=variables,
+        time_rtol=time_rtol,
+    )
+
+
+def save_hdf5(record: Record, path: PathLike) -> Path:
+    """Write `record` as HDF5: one dataset per signal at the root with a `unit` attribute,
+    a dataset `t` [s] (`unit = "s"`), and the metadata as JSON in the root attribute
+    `jaxvs_metadata`.
+
+    **Returns:**
+
+    The path written.
+    """
+    import h5py
+
+    file = Path(path)
+    _check_writable_names(record, reserved=("t",))
+    for name in record.names:
+        if "/" in name:
+            raise ValueError(
+                f"Signal name {name!r} contains '/', which HDF5 reads as a group; rename it."
+            )
+    with h5py.File(file, "w") as handle:
+        handle.create_dataset("t", data=record.t).attrs["unit"] = "s"
+        for name in record.names:
+            dataset = handle.create_dataset(name, data=np.asarray(record[name]))
+            if name in record.units:
+                dataset.attrs["unit"] = record.units[name]
+        handle.attrs[_METADATA_KEY] = _metadata_json(record)
+    return file
+
+
+# --- EMPS ------------------------------------------------------------------------------------
+
+_EMPS_REQUIRED = ("t", "qm", "qg", "vir", "kp", "kv", "gtau")
+
+
+def load_emps(path: PathLike, *, time_rtol: float = DEFAULT_TIME_RTOL) -> Record:
+    """Load an EMPS benchmark file (`DATA_EMPS.mat` or `DATA_EMPS_PULSES.mat`) as it is
+    distributed (Janot, Gautier, Brunot 2019), with jaxvs' canonical drive names.
+
+    | file | record | unit |
+    |---|---|---|
+    | `qm` measured motor position (load side) | `q` | m |
+    | `qg` reference position | `r` | m |
+    | `gtau·vir` motor force | `u` | N |
+    | `vir` controller output | `vir` | V |
+    | `pulses_N` external force pulses (validation file only) | `f_ext` | N |
+
+    The scalars `kp` [1/s], `kv` [V/(m/s)] and `gtau` [N/V] go to the metadata, with
+    `"source": "EMPS"`. The controller is `vir = kp·kv·(qg − qm) − kv·q̇m` (description,
+    §1.3), the force `gtau·vir`.
+
+    **Arguments:**
+
+    - `path`: the `.mat` file.
+    - `time_rtol`: tolerance of the uniform-time check (the files jitter by ≈3e-5·dt).
+
+    **Returns:**
+
+    A `Record` with 1 kHz sampling.
+
+    **Raises:**
+
+    `ValueError` when a required EMPS variable is missing.
+    """
+    file = _existing_file(path)
+    variables = _read_mat(file)
+    missing = [name for name in _EMPS_REQUIRED if name not in variables]
+    if missing:
+        raise ValueError(
+            f"{str(file)!r} is not an EMPS benchmark file: missing {missing} (found "
+            f"{sorted(variables)}). Use load_mat for other MAT files."
+        )
+
+    def column(name: str) -> np.ndarray:
+        return np.asarray(variables[name], dtype=np.float64).reshape(-1)
+
+    def scalar(name: str) -> float:
+        value = np.asarray(variables[name], dtype=np.float64)
+        if value.size != 1:
+            raise ValueError(f"EMPS variable {name!r} should be a scalar, got shape {value.shape}.")
+        return float(value.reshape(()))
+
+    gains = {name: scalar(name) for name in ("kp", "kv", "gtau")}
+    signals = {
+        "q": column("qm"),
+        "r": column("qg"),
+        "u": gains["gtau"] * column("vir"),
+        "vir": column("vir"),
+    }
+    units = {"q": "m", "r": "m", "u": "N", "vir": "V"}
+    if "pulses_N" in variables:
+        signals["f_ext"] = column("pulses_N")
+        units["f_ext"] = "N"
+    metadata: dict[str, Any] = {**gains, "source": "EMPS", "file": file.name}
+    return Record(signals, t=column("t"), units=units, metadata=metadata, time_rtol=time_rtol)

@@ -1,0 +1,125 @@
+"""The interface every linear jaxvs model implements, and the batching convention.
+
+A model's array fields are its physical parameters. One model describes one system;
+a *family* is the same model class whose array fields carry extra leading axes
+(`batch_shape`), e.g. one system per position of the other axis. Methods of a model
+handle one system; the public free functions (`frequency_response`, `simulate`, ...)
+map over `batch_shape` with `jax.vmap`, so a family of 4096 systems is one call.
+"""
+
+import abc
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Complex
+
+if TYPE_CHECKING:
+    from ._realisation import ModalRealisation
+    from ._statespace import StateSpace
+
+
+class AbstractLinearModel(eqx.Module):
+    """A continuous-time, finite-dimensional linear time-invariant model.
+
+    Subclasses implement the response of one system; batching over a family is done by
+    the free functions of `jaxvs` through [`map_batch`][].
+    """
+
+    @property
+    @abc.abstractmethod
+    def n_inputs(self) -> int:
+        """Number of inputs (static)."""
+
+    @property
+    @abc.abstractmethod
+    def n_outputs(self) -> int:
+        """Number of outputs (static)."""
+
+    @property
+    @abc.abstractmethod
+    def order(self) -> int:
+        """Number of states of a minimal realisation (static)."""
+
+    @property
+    @abc.abstractmethod
+    def batch_shape(self) -> tuple[int, ...]:
+        """Leading axes of the parameters: `()` for one system, `(n,)` for a family."""
+
+    @abc.abstractmethod
+    def response(self, s: Complex[Array, " freq"]) -> Complex[Array, "freq out in"]:
+        """Transfer matrix `G(s)` of one (unbatched) system at complex frequencies `s`."""
+
+    @abc.abstractmethod
+    def modal_realisation(self) -> "ModalRealisation":
+        """A well-conditioned real block-diagonal realisation of one (unbatched) system."""
+
+    def to_state_space(self) -> "StateSpace":
+        """Dense state-space form `(A, B, C, D)` of one or a family of systems.
+
+        The realisation is the real block-diagonal (modal) one, which keeps its digits
+        at order 8-12 where companion forms do not.
+        """
+        return map_batch(lambda m: m.modal_realisation().to_state_space(), self)
+
+    @property
+    def is_siso(self) -> bool:
+        return self.n_inputs == 1 and self.n_outputs == 1
+
+
+def _leaf_batch(leaf: Array, core_ndim: int) -> tuple[int, ...]:
+    return tuple(leaf.shape[: leaf.ndim - core_ndim])
+
+
+def check_batch(shapes: list[tuple[int, ...]], what: str) -> tuple[int, ...]:
+    """All fields of a model must carry the same leading batch shape."""
+    first = shapes[0]
+    for s in shapes[1:]:
+        if s != first:
+            raise ValueError(
+                f"{what}: the parameters carry different leading (family) axes {shapes}. "
+                "Give every parameter the same leading batch shape, e.g. (n_positions,), "
+                "or broadcast them with jnp.broadcast_to before building the model."
+            )
+    return first
+
+
+def map_batch(fn: Callable[..., Any], model: Any, *args: Any, batch_shape=None) -> Any:
+    """Apply `fn(model, *args)` to every member of a batched model.
+
+    `args` are either unbatched (shared by every member) or carry the model's batch
+    shape as leading axes; pass them already broadcast. The batch axes are flattened,
+    mapped with one `jax.vmap`, and restored on every output leaf.
+    """
+    shape = model.batch_shape if batch_shape is None else batch_shape
+    if shape == ():
+        return fn(model, *args)
+    size = math.prod(shape)
+    nd = len(shape)
+
+    def flat(x):
+        return jnp.reshape(x, (size,) + x.shape[nd:])
+
+    flat_model = jax.tree_util.tree_map(flat, model)
+    arg_axes = []
+    flat_args = []
+    for a in args:
+        if a is None:
+            arg_axes.append(None)
+            flat_args.append(a)
+        elif isinstance(a, tuple) and len(a) == 2 and a[0] == "batched":
+            arg_axes.append(0)
+            flat_args.append(jax.tree_util.tree_map(flat, a[1]))
+        else:
+            arg_axes.append(None)
+            flat_args.append(a)
+    out = jax.vmap(fn, in_axes=(0, *arg_axes))(flat_model, *flat_args)
+    return jax.tree_util.tree_map(lambda y: jnp.reshape(y, shape + y.shape[1:]), out)
+
+
+def batched(x: Any) -> tuple[str, Any]:
+    """Mark an argument of [`map_batch`][] as carrying the model's batch axes."""
+    return ("batched", x)
