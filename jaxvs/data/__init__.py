@@ -1,0 +1,32 @@
+"""Data layer: validated experiment records, file loaders and writers, time-respecting
+calibration/validation splits, and excitation signals."""
+
+from ._excitation import (
+    PRBS_ORDERS as PRBS_ORDERS,
+    Motion as Motion,
+    bang_bang as bang_bang,
+    prbs as prbs,
+    prbs_taps as prbs_taps,
+    swept_sine as swept_sine,
+    trapezoid as trapezoid,
+    white_noise as white_noise,
+)
+from ._loaders import (
+    SUPPORTED_SUFFIXES as SUPPORTED_SUFFIXES,
+    load as load,
+    load_csv as load_csv,
+    load_emps as load_emps,
+    load_hdf5 as load_hdf5,
+    load_mat as load_mat,
+    load_npz as load_npz,
+    save_csv as save_csv,
+    save_hdf5 as save_hdf5,
+    save_mat as save_mat,
+    save_npz as save_npz,
+)
+from ._record import DEFAULT_TIME_RTOL as DEFAULT_TIME_RTOL, Record as Record
+from ._splits import (
+    Split as Split,
+    split_blocks as split_blocks,
+    split_experiments as split_experiments,
+)

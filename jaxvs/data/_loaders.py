@@ -223,9 +223,7 @@ def load(
     if suffix == ".npz":
         return load_npz(file, **options)  # type: ignore[arg-type]
     if suffix == ".mat":
-        import scipy.io
-
-        if _is_emps(name for name, *_ in scipy.io.whosmat(file)):
+        if _is_emps(_read_mat(file, names_only=True)):
             record = load_emps(file, time_rtol=time_rtol)
             return record if names is None else record.select(_names_list(names) or [])
         return load_mat(file, **options)  # type: ignore[arg-type]
@@ -469,16 +467,21 @@ def _check_writable_names(record: Record, reserved: Sequence[str]) -> None:
 # --- MAT -------------------------------------------------------------------------------------
 
 
-def _read_mat(file: Path) -> dict[str, np.ndarray]:
+def _read_mat(file: Path, *, names_only: bool = False) -> dict[str, Any]:
+    """The variables of a MAT file (or only their names, as keys with value `None`)."""
     import scipy.io
 
     try:
+        if names_only:
+            return {name: None for name, *_ in scipy.io.whosmat(file)}
         content = scipy.io.loadmat(file, squeeze_me=False, mat_dtype=False)
     except NotImplementedError:
         raise ValueError(
             f"{str(file)!r} is a MATLAB v7.3 file, which is HDF5 inside; load it with "
             "load_hdf5 (or save it in MATLAB with -v7)."
         ) from None
+    except (ValueError, TypeError, OSError, scipy.io.matlab.MatReadError) as error:
+        raise ValueError(f"{str(file)!r} cannot be read as a MAT file ({error}).") from None
     return {key: value for key, value in content.items() if not key.startswith("__")}
 
 
@@ -569,8 +572,9 @@ def load_hdf5(
 ) -> Record:
     """Load an HDF5 file (`h5py`, opened read-only).
 
-    Every dataset in the file is visited (a dataset in a group is named by its path without
-    the leading `/`, e.g. `axis_x/q`). Datasets with the length of the time dataset are
+    Every dataset in the file is visited, in creation order where the file tracks it, else
+    alphabetically (a dataset in a group is named by its path without the leading `/`, e.g.
+    `axis_x/q`). Datasets with the length of the time dataset are
     signals, with the unit from their `unit` (or `units`) attribute; scalar datasets and the
     root group's attributes go to metadata; other datasets go to metadata as read-only
     arrays. The metadata written by `save_hdf5` (attribute `jaxvs_metadata`) are restored.
@@ -594,21 +598,28 @@ def load_hdf5(
         raise ValueError(f"{source} cannot be read as HDF5 ({error}).") from None
     with handle:
 
-        def visit(name: str, item: Any) -> None:
-            if not isinstance(item, h5py.Dataset):
-                return
-            if item.dtype.kind in "SO" and item.shape == ():
-                value = item.asstr()[()] if item.dtype.kind == "O" else item[()].decode()
-                variables[name] = np.array(value)
-            elif item.dtype.kind in "biuf":
-                variables[name] = np.asarray(item[()])
-            else:
-                metadata[name] = _attr_value(item[()])
-            unit = item.attrs.get("unit", item.attrs.get("units"))
-            if unit is not None:
-                units[name] = str(_attr_value(unit))
+        def visit(group: Any, prefix: str) -> None:
+            # Iterating a group (unlike `visititems`) keeps the creation order when the
+            # file tracks it, so signals come back in the order they were written.
+            for key, item in group.items():
+                name = prefix + key
+                if isinstance(item, h5py.Group):
+                    visit(item, name + "/")
+                    continue
+                if not isinstance(item, h5py.Dataset):
+                    continue
+                if item.dtype.kind in "SO" and item.shape == ():
+                    value = item.asstr()[()] if item.dtype.kind == "O" else item[()].decode()
+                    variables[name] = np.array(value)
+                elif item.dtype.kind in "biuf":
+                    variables[name] = np.asarray(item[()])
+                else:
+                    metadata[name] = _attr_value(item[()])
+                unit = item.attrs.get("unit", item.attrs.get("units"))
+                if unit is not None:
+                    units[name] = str(_attr_value(unit))
 
-        handle.visititems(visit)
+        visit(handle, "")
         attributes = {key: _attr_value(value) for key, value in handle.attrs.items()}
     stored = attributes.pop(_METADATA_KEY, None)
     columns, found_metadata = _split_variables(variables, time=time)
@@ -647,7 +658,7 @@ def save_hdf5(record: Record, path: PathLike) -> Path:
             raise ValueError(
                 f"Signal name {name!r} contains '/', which HDF5 reads as a group; rename it."
             )
-    with h5py.File(file, "w") as handle:
+    with h5py.File(file, "w", track_order=True) as handle:
         handle.create_dataset("t", data=record.t).attrs["unit"] = "s"
         for name in record.names:
             dataset = handle.create_dataset(name, data=np.asarray(record[name]))
@@ -672,11 +683,19 @@ def load_emps(path: PathLike, *, time_rtol: float = DEFAULT_TIME_RTOL) -> Record
     | `qg` reference position | `r` | m |
     | `gtau·vir` motor force | `u` | N |
     | `vir` controller output | `vir` | V |
-    | `pulses_N` external force pulses (validation file only) | `f_ext` | N |
+    | `pulses_N` force pulses (validation file only), as stored | `pulses` | — |
 
     The scalars `kp` [1/s], `kv` [V/(m/s)] and `gtau` [N/V] go to the metadata, with
-    `"source": "EMPS"`. The controller is `vir = kp·kv·(qg − qm) − kv·q̇m` (description,
-    §1.3), the force `gtau·vir`.
+    `"source": "EMPS"` and the file name. The controller is
+    `vir = kp·kv·(qg − qm) − kv·q̇m` (description, §1.3), the force `gtau·vir`.
+
+    On the pulses: `pulses_N` is a 0/5 square wave (0.5 s on, 0.5 s off) that the
+    description calls "given in N". The recorded `vir` already contains them: it equals the
+    controller law applied to `qm`, `qg` plus ≈5.07 V while a pulse is on, so `u = gtau·vir`
+    is the *total* motor force including the pulses, and a rigid-body fit of
+    `M q̈ + Fv q̇ + Fc sign(q̇) + offset = u` gives the pulses no extra weight. They are
+    therefore kept under the neutral name `pulses` without a unit, not as an external force
+    `f_ext` to add to `u` (that would count them twice).
 
     **Arguments:**
 
@@ -718,7 +737,6 @@ def load_emps(path: PathLike, *, time_rtol: float = DEFAULT_TIME_RTOL) -> Record
     }
     units = {"q": "m", "r": "m", "u": "N", "vir": "V"}
     if "pulses_N" in variables:
-        signals["f_ext"] = column("pulses_N")
-        units["f_ext"] = "N"
+        signals["pulses"] = column("pulses_N")
     metadata: dict[str, Any] = {**gains, "source": "EMPS", "file": file.name}
     return Record(signals, t=column("t"), units=units, metadata=metadata, time_rtol=time_rtol)

@@ -113,8 +113,8 @@ def _uniform_time_base(t: Any, n: int, rtol: float) -> tuple[float, float]:
     if not_increasing.any():
         index = int(np.argmax(not_increasing)) + 1
         raise ValueError(
-            f"The time vector is not strictly increasing: t[{index}] = {time[index]!r} <= "
-            f"t[{index - 1}] = {time[index - 1]!r}. Sort the samples by time and drop "
+            f"The time vector is not strictly increasing: t[{index}] = {float(time[index])!r} <= "
+            f"t[{index - 1}] = {float(time[index - 1])!r}. Sort the samples by time and drop "
             "duplicated time stamps first."
         )
     t0 = float(time[0])
@@ -124,7 +124,7 @@ def _uniform_time_base(t: Any, n: int, rtol: float) -> tuple[float, float]:
     if off_grid.any():
         index = int(np.argmax(off_grid))
         raise ValueError(
-            f"The time vector is not uniform: sample {index} (t = {time[index]!r} s) lies "
+            f"The time vector is not uniform: sample {index} (t = {float(time[index])!r} s) lies "
             f"{deviation[index] / dt:.3g}·dt off the uniform grid t0 + k·dt with "
             f"dt = {dt!r} s (tolerance {rtol:g}·dt). Resample onto a uniform grid with "
             "jaxvs.signal.resample first, or loosen time_rtol if the jitter is harmless."
@@ -305,6 +305,19 @@ class Record:
         time.setflags(write=False)
         set_(record, "_time", time)
         return record
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        # Pickling goes through the validating constructor, which re-freezes the arrays.
+        return (
+            _unpickle,
+            (self._signals, self._t0, self._dt, self._units, dict(self._metadata)),
+        )
+
+    def __copy__(self) -> Record:
+        return self  # immutable: a copy is the record itself
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> Record:
+        return self
 
     def __setattr__(self, name: str, value: Any) -> None:
         raise AttributeError(
@@ -497,7 +510,7 @@ class Record:
         if end <= begin:
             raise ValueError(
                 f"window({t_start}, {t_end}) holds no sample; the record spans "
-                f"[{self._t0}, {self._t0 + self.duration}] s."
+                f"[{self._t0:g}, {self._t0 + self.duration:g}] s."
             )
         return self.slice(begin, end)
 
@@ -563,3 +576,13 @@ class Record:
         if self._metadata:
             text += f"; metadata: {', '.join(self._metadata)}"
         return text + ")"
+
+
+def _unpickle(
+    signals: dict[str, np.ndarray],
+    t0: float,
+    dt: float,
+    units: dict[str, str],
+    metadata: dict[str, Any],
+) -> Record:
+    return Record(signals, dt=dt, t0=t0, units=units, metadata=metadata)
