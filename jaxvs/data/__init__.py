@@ -30,3 +30,4 @@ from ._splits import (
     split_blocks as split_blocks,
     split_experiments as split_experiments,
 )
+from ._frf import FRF_KINDS as FRF_KINDS, FRFData as FRFData

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-# What an FRF relates (Ewins, *Modal Testing*, 2000, §1.3): response per force as
+# What an FRF relates (Ewins, *Modal Testing*, 2000, ch. 1): response per force as
 # displacement (receptance), velocity (mobility) or acceleration (accelerance); a response
 # per response is a transmissibility (study 002, eq. 6); "frf" is anything else.
 FRF_KINDS = ("frf", "receptance", "mobility", "accelerance", "transmissibility")
@@ -30,7 +30,9 @@ def _freeze_metadata(metadata: Mapping[str, Any] | None) -> tuple[tuple[str, Any
     if metadata is None:
         return ()
     if not isinstance(metadata, Mapping):
-        raise TypeError(f"FRFData: metadata must be a mapping (dict), got {type(metadata).__name__}.")
+        raise TypeError(
+            f"FRFData: metadata must be a mapping (dict), got {type(metadata).__name__}."
+        )
     items = []
     for key, value in metadata.items():
         if not isinstance(key, str):
@@ -63,7 +65,7 @@ class FRFData(eqx.Module):
     - `coherence`: optional ordinary coherence `γ²` in [0, 1], same shape as `H` (real).
     - `n_averages`: optional number of averaged blocks (segments × records) behind the
       estimate; the variance of an H1 estimate scales as `(1 − γ²) / (2 n γ²)` (Bendat &
-      Piersol, *Random Data*, 4th ed., 2010, eq. 9.90).
+      Piersol, *Random Data*, 4th ed., 2010, ch. 9).
     - `input_unit`, `output_unit`: units of the excitation and the response, e.g. `"N"` and
       `"m/s^2"` (`H` then has unit `output_unit / input_unit`); `""` when unknown.
     - `kind`: one of `"frf"`, `"receptance"`, `"mobility"`, `"accelerance"`,
@@ -361,4 +363,3 @@ def _check_coherence_range(c: Array) -> Array:
             "ordinary (squared) coherence |Sxy|²/(Sxx·Syy), not its square root or a dB value."
         )
     return c
-

@@ -1,5 +1,6 @@
 """`frequency_response`: the complex response of any linear model, one call for a family."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -36,13 +37,15 @@ def frequency_response(
             f"frequency_response: omega must be 1-D (freq,); got shape {omega.shape}. "
             "Flatten it, or vmap over extra axes."
         )
-    try:
-        finite = bool(np.all(np.isfinite(np.asarray(omega))))
-    except Exception:  # traced: values are checked by the caller's own pipeline
-        finite = True
-    if not finite:
+    if not isinstance(omega, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(omega))):
         raise ValueError("frequency_response: omega contains NaN or inf.")
-    omega = omega.astype(jnp.result_type(float)) if not jnp.issubdtype(omega.dtype, jnp.floating) else omega
+    if not jnp.issubdtype(omega.dtype, jnp.floating):
+        omega = omega.astype(jnp.result_type(float))
+    return _response(model, omega)
+
+
+@eqx.filter_jit
+def _response(model: AbstractLinearModel, omega: Array) -> Array:
     s = jax.lax.complex(jnp.zeros_like(omega), omega)
     g = map_batch(lambda m: m.response(s), model)
     if model.is_siso:

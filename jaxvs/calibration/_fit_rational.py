@@ -1,0 +1,442 @@
+"""`fit_rational`: frequency-domain fit of rational transfer / transmissibility functions."""
+
+import math
+import operator
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
+
+from ..models import RationalTF
+from . import _sk
+from ._lm import levenberg_marquardt
+from ._results import RESULTS
+
+# Heuristic: a unit-diagonal-scaled JᵀJ with condition number above 1e13 (float64 keeps
+# ~16 digits, the inverse then has at most ~3) is treated as singular.
+_SINGULAR_COND = 1e13
+_RELAXED = True
+
+
+class FitReport(eqx.Module):
+    """What [`fit_rational`][] found, for one fit or (with leading axes) a family of fits.
+
+    The parameter vector is `θ = (num[0], …, num[nb], den[1], …, den[na])`: the free
+    coefficients of the returned `RationalTF`, highest power first (`den[0] = 1` is fixed).
+
+    **Fields:**
+
+    - `result`: a [`RESULTS`][] code, `RESULTS.successful` when the fit converged.
+    - `residual_norm`: `‖w (Ĥ - H)‖₂` over the frequency points [units of `w H`].
+    - `relative_error`: `‖w (Ĥ - H)‖₂ / ‖w H‖₂` [-].
+    - `noise_variance`: `σ² = ‖w (Ĥ - H)‖² / (2 n_freq - n_params)`, the variance of each
+      real and imaginary part of the weighted residual (units of `(w H)²`).
+    - `covariance`: `(…, n_params, n_params)` parameter covariance `σ² (JᵀJ)⁻¹`
+      (Gauss-Newton / Cramér-Rao approximation, e.g. Pintelon & Schoukens 2012, *System
+      Identification: A Frequency Domain Approach*, §7.2.3); valid when the weights are
+      proportional to the inverse noise standard deviation and the noise is small.
+    - `num_stderr`, `den_stderr`: standard errors `sqrt(diag(covariance))` laid out as
+      `num` and `den` (`den_stderr[..., 0] = 0`: the monic coefficient is fixed).
+    - `jacobian_condition`: condition number of the column-scaled `JᵀJ` (large values
+      mean poorly identifiable parameters; above 1e13 the result is `singular`).
+    - `frequency_scale`: `ω0` [rad/s], the geometric mean of the positive band edges;
+      the fit works in `s / ω0`.
+    - `num_steps`: Levenberg-Marquardt steps taken (accepted or rejected).
+    - `num_init_steps`: Sanathanan-Koerner iterations of the linear initialisation
+      (0 when `init` was given).
+    - `flipped`: whether the initialisation had right-half-plane poles that were
+      reflected into the left half-plane.
+    """
+
+    result: RESULTS
+    residual_norm: Float[Array, "*batch"]
+    relative_error: Float[Array, "*batch"]
+    noise_variance: Float[Array, "*batch"]
+    covariance: Float[Array, "*batch p p"]
+    num_stderr: Float[Array, "*batch nb1"]
+    den_stderr: Float[Array, "*batch na1"]
+    jacobian_condition: Float[Array, "*batch"]
+    frequency_scale: Float[Array, ""]
+    num_steps: Int[Array, "*batch"]
+    num_init_steps: Int[Array, "*batch"]
+    flipped: Bool[Array, "*batch"]
+
+
+def _as_order(order) -> tuple[int, int]:
+    if isinstance(order, (int, np.integer)) and not isinstance(order, bool):
+        order = (int(order), int(order))
+    try:
+        nb, na = (operator.index(o) for o in order)
+    except (TypeError, ValueError):
+        raise TypeError(
+            f"fit_rational: order must be a pair of integers (nb, na) (numerator and "
+            f"denominator orders), or one integer n for a TMF (n, n); got {order!r}."
+        ) from None
+    if na < 1 or nb < 0:
+        raise ValueError(
+            f"fit_rational: order (nb, na) = ({nb}, {na}) needs na >= 1 and nb >= 0; a "
+            "pure gain (na = 0) has no dynamics to fit."
+        )
+    if nb > na:
+        raise ValueError(
+            f"fit_rational: order (nb, na) = ({nb}, {na}) is improper (numerator order > "
+            "denominator order); jaxvs models are proper. Use nb <= na (a TMF has nb == na)."
+        )
+    return nb, na
+
+
+def _concrete(x) -> np.ndarray | None:
+    try:
+        return np.asarray(x)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return None
+
+
+def _check_finite(x: Array, what: str, fix: str) -> Array:
+    """NaN/inf: a ValueError on concrete input, `eqx.error_if` under `jit`."""
+    value = _concrete(x)
+    msg = f"fit_rational: {what} contains NaN or inf. {fix}"
+    if value is not None:
+        if not np.all(np.isfinite(value)):
+            raise ValueError(msg)
+        return x
+    return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), msg)
+
+
+def _stderr(cov: Array) -> Array:
+    return jnp.sqrt(jnp.clip(jnp.diagonal(cov, axis1=-2, axis2=-1), 0.0))
+
+
+@eqx.filter_jit
+def _fit_batch(
+    omega: Float[Array, " freq"],
+    h: Complex[Array, "batch freq"],
+    w2: Float[Array, "batch freq"] | Float[Array, " freq"],
+    init_theta: Float[Array, "batch p"] | None,
+    nb: int,
+    na: int,
+    stable: bool,
+    max_steps: int,
+    sk_steps: int,
+    rtol: float,
+    throw: bool,
+):
+    n = na
+    p = nb + 1 + na
+    dtype = omega.dtype
+    positive = omega > 0
+    lo = jnp.min(jnp.where(positive, omega, jnp.inf))
+    hi = jnp.max(omega)
+    w0 = jnp.sqrt(lo * hi)
+    nu = omega / w0
+    grid = _sk.make_grid(nu, n)
+    alpha_start = _sk.start_denominator(lo / w0, hi / w0, n).astype(dtype)
+    # Scale of each θ entry in the original coefficients: (s/ω0)^k -> ω0^(n-k) s^k.
+    k_num = jnp.arange(nb + 1)
+    k_den = jnp.arange(n)
+    scale = jnp.concatenate([w0 ** (n - k_num), w0 ** (n - k_den)])
+
+    def evaluate(theta, data):
+        return _sk.normal_equations(theta, data, grid, nb)
+
+    def feasible(theta, args):
+        del args
+        if stable:
+            return _sk.is_hurwitz(theta[nb + 1 :])
+        return jnp.asarray(True)
+
+    def fit_one(hr, hi, ww, theta_init):
+        data = (hr, hi, ww)
+        if theta_init is None:
+
+            def sk_cond(c):
+                _, k, done = c
+                return (~done) & (k < sk_steps)
+
+            def sk_body(c):
+                alpha, k, _ = c
+                new = (_sk.sk_step_relaxed(alpha, data, grid, nb) if _RELAXED else _sk.sk_step(alpha, data, grid, nb)[nb + 1 :])
+                change = jnp.linalg.norm(new - alpha) / (jnp.linalg.norm(new) + 1e-300)
+                # Heuristic: 1e-8 suffices, Levenberg-Marquardt polishes the optimum.
+                return new, k + 1, (change <= 1e-8) | ~jnp.all(jnp.isfinite(new))
+
+            alpha_sk, k_sk, _ = jax.lax.while_loop(
+                sk_cond, sk_body, (alpha_start, jnp.asarray(0), jnp.asarray(False))
+            )
+            if stable:
+                alpha0, flipped = _sk.flip_unstable(alpha_sk)
+            else:
+                alpha0, flipped = alpha_sk, jnp.asarray(False)
+            theta0 = jnp.concatenate([_sk.refit_numerator(alpha0, data, grid, nb), alpha0])
+            beta_free = _sk.refit_numerator(alpha_sk, data, grid, nb)
+            cost_free = _sk.model_cost(jnp.concatenate([beta_free, alpha_sk]), data, grid, nb)
+            bad_init = jnp.asarray(False)
+        else:
+            theta0 = theta_init
+            k_sk = jnp.asarray(0)
+            flipped = jnp.asarray(False)
+            cost_free = jnp.asarray(jnp.inf, dtype)
+            bad_init = ~feasible(theta0, None)
+
+        state, result = levenberg_marquardt(
+            evaluate, feasible, theta0, data, max_steps=max_steps, rtol=rtol
+        )
+        # Unstable data: the stable optimum is > 2x worse in error (> 4x in cost) than
+        # the unconstrained linear fit that needed right-half-plane poles.
+        unstable_data = flipped & (state.cost > 4.0 * cost_free)
+
+        d = jnp.diagonal(state.jtj)
+        d = jnp.where(d > 0, d, 1.0)
+        sc = 1.0 / jnp.sqrt(d)
+        eig, vec = jnp.linalg.eigh(state.jtj * sc[:, None] * sc[None, :])
+        cond = eig[-1] / jnp.where(eig[0] > 0, eig[0], 0.0)
+        singular = ~(cond <= _SINGULAR_COND)
+        inv_eig = jnp.where(eig > eig[-1] / _SINGULAR_COND, 1.0 / eig, jnp.inf)
+        inv = (vec * inv_eig) @ vec.T * sc[:, None] * sc[None, :]
+        n_data = 2 * jnp.sum(ww > 0)
+        dof = jnp.maximum(n_data - p, 1)
+        sigma2 = 2.0 * state.cost / dof
+        cov = sigma2 * inv * scale[:, None] * scale[None, :]
+
+        result = RESULTS.where(singular, RESULTS.singular, result)
+        result = RESULTS.where(
+            (result == RESULTS.successful) | (result == RESULTS.max_steps_reached),
+            RESULTS.where(unstable_data, RESULTS.unstable_data, result),
+            result,
+        )
+        result = RESULTS.where(bad_init, RESULTS.unstable_initial_guess, result)
+        theta = state.theta
+        if throw:
+            theta = result.error_if(theta, result != RESULTS.successful)
+        h_norm = jnp.sqrt(jnp.sum(ww * (hr**2 + hi**2)))
+        res_norm = jnp.sqrt(2.0 * state.cost)
+        out = dict(
+            theta=theta,
+            cov=cov,
+            residual_norm=res_norm,
+            relative_error=res_norm / h_norm,
+            noise_variance=sigma2,
+            cond=cond,
+            num_steps=state.num_steps,
+            num_init_steps=k_sk,
+            flipped=flipped,
+        )
+        return out, result
+
+    w_axis = 0 if w2.ndim == 2 else None
+    i_axis = None if init_theta is None else 0
+    out, result = jax.vmap(fit_one, in_axes=(0, 0, w_axis, i_axis))(
+        h.real, h.imag, w2, init_theta
+    )
+
+    theta = out["theta"] * scale
+    num = theta[:, : nb + 1][:, ::-1]
+    den_free = theta[:, nb + 1 :][:, ::-1]
+    den = jnp.concatenate([jnp.ones((den_free.shape[0], 1), dtype), den_free], axis=1)
+    # Reorder θ from ascending scaled powers to the RationalTF layout (highest first).
+    perm = np.concatenate([np.arange(nb, -1, -1), nb + 1 + np.arange(n - 1, -1, -1)])
+    cov = out["cov"][:, perm][:, :, perm]
+    std = _stderr(cov)
+    zero = jnp.zeros((std.shape[0], 1), dtype)
+    report = FitReport(
+        result=result,
+        residual_norm=out["residual_norm"],
+        relative_error=out["relative_error"],
+        noise_variance=out["noise_variance"],
+        covariance=cov,
+        num_stderr=std[:, : nb + 1],
+        den_stderr=jnp.concatenate([zero, std[:, nb + 1 :]], axis=1),
+        jacobian_condition=out["cond"],
+        frequency_scale=w0,
+        num_steps=out["num_steps"],
+        num_init_steps=out["num_init_steps"],
+        flipped=out["flipped"],
+    )
+    return num, den, report
+
+
+def fit_rational(
+    omega: ArrayLike,
+    H: ArrayLike,
+    order: tuple[int, int] | int,
+    *,
+    weights: ArrayLike | None = None,
+    init: RationalTF | None = None,
+    stable: bool = True,
+    max_steps: int = 100,
+    sk_steps: int = 30,
+    rtol: float = 1e-10,
+    throw: bool = True,
+) -> tuple[RationalTF, FitReport]:
+    r"""Fit `G(s) = B(s) / A(s)` of orders `(nb, na)` to a measured frequency response.
+
+    Minimises the weighted output error `½ Σ_i w_i² |G(jω_i) - H_i|²` (real and imaginary
+    parts) in three stages, all in scaled frequency `s / ω0` (`ω0` = geometric mean of
+    the band edges) for conditioning:
+
+    1. **Linear initialisation** by Sanathanan-Koerner iterations (Sanathanan & Koerner
+       1963, IEEE TAC 8(1)) from vector-fitting starting poles (Gustavsen & Semlyen 1999),
+       no initial guess needed;
+    2. **pole flipping**: right-half-plane poles of the initialisation are reflected into
+       the left half-plane (`stable=True`), then the numerator is refitted;
+    3. **Levenberg-Marquardt** on the numerator and monic denominator coefficients; with
+       `stable=True`, steps that would make the denominator unstable (Routh test) are
+       rejected, so the result is always stable.
+
+    The normal equations of every stage are formed from power moments of the data (Levy
+    1959), so one fit costs `O(n_freq · order)` per iteration and a family of fits is one
+    vectorised call.
+
+    **Arguments:**
+
+    - `omega`: `(freq,)` angular frequencies [rad/s], real, finite, `>= 0` with at least
+      one positive value; shared by every member of a family.
+    - `H`: `(*batch, freq)` complex response (e.g. a TMF or an FRF, any units); leading
+      axes make a family (e.g. one TMF per axis position) fitted in one call.
+    - `order`: `(nb, na)` numerator and denominator orders with `0 <= nb <= na`, `na >= 1`;
+      an integer `n` means `(n, n)` (a transmissibility function).
+    - `weights`: optional real, non-negative weights `w` [1 / units of H], shape `(freq,)`
+      or `(*batch, freq)`; e.g. `1 / |H|` for a relative error, coherence-based weights
+      `sqrt(γ² / (1 - γ²))`, or `1 / σ_H` for a maximum-likelihood fit (then
+      `FitReport.covariance` is calibrated). Default: all ones.
+    - `init`: optional initial `RationalTF` of the same orders (unbatched, or with the
+      batch shape of `H`); skips the linear initialisation. With `stable=True` it must be
+      stable (otherwise `RESULTS.unstable_initial_guess`).
+    - `stable`: keep every pole in the open left half-plane (default). If the data need
+      right-half-plane poles, the result code is `RESULTS.unstable_data`; pass
+      `stable=False` to fit unstable systems (no flipping, no stability constraint).
+    - `max_steps`: Levenberg-Marquardt step limit (accepted and rejected steps).
+    - `sk_steps`: largest number of Sanathanan-Koerner iterations.
+    - `rtol`: relative tolerance of the Levenberg-Marquardt stopping rules (cost reduction
+      and scaled step).
+    - `throw`: raise on failure (an `EquinoxRuntimeError` with the [`RESULTS`][] message);
+      with `throw=False` check `report.result` instead.
+
+    **Returns:**
+
+    `(model, report)`: a `RationalTF` with `num` `(*batch, nb + 1)` and monic `den`
+    `(*batch, na + 1)` (highest power first, `den[..., 0] = 1`), and a [`FitReport`][].
+
+    **Raises:**
+
+    `TypeError` for a real `H` or a non-integer `order`; `ValueError` for mismatched
+    shapes, NaN/inf, negative `omega` or weights, an improper order (`nb > na`), fewer
+    frequency points than parameters (`nb + na + 1`), or float64 disabled.
+
+    !!! note
+        Needs float64 (`jax.config.update("jax_enable_x64", True)`): the normal equations
+        square the condition number of the problem.
+    """
+    nb, na = _as_order(order)
+    n_params = nb + na + 1
+    if jax.dtypes.canonicalize_dtype(jnp.float64) != jnp.float64:
+        raise ValueError(
+            "fit_rational: needs float64 (the normal equations square the condition "
+            "number). Enable it at the start of your program with "
+            'jax.config.update("jax_enable_x64", True).'
+        )
+    omega = jnp.asarray(omega)
+    if jnp.iscomplexobj(omega):
+        raise TypeError("fit_rational: omega is the real angular frequency [rad/s].")
+    if omega.ndim != 1:
+        raise ValueError(
+            f"fit_rational: omega must be 1-D (freq,) and shared by the family; got shape "
+            f"{omega.shape}."
+        )
+    omega = omega.astype(jnp.float64)
+    H = jnp.asarray(H)
+    if not jnp.iscomplexobj(H):
+        raise TypeError(
+            "fit_rational: H must be the complex frequency response; got a real array of "
+            f"dtype {H.dtype}. Magnitudes alone do not determine a rational model; if the "
+            "response really is real, pass H.astype(complex)."
+        )
+    H = H.astype(jnp.complex128)
+    if H.ndim < 1 or H.shape[-1] != omega.shape[0]:
+        raise ValueError(
+            f"fit_rational: H of shape {H.shape} does not match omega of shape "
+            f"{omega.shape}; H must be (*batch, freq) with freq = len(omega)."
+        )
+    n_freq = omega.shape[0]
+    if n_freq < n_params:
+        raise ValueError(
+            f"fit_rational: {n_freq} frequency points cannot determine {n_params} "
+            f"parameters (order {(nb, na)}: nb + na + 1). Give at least {n_params} "
+            "points, or lower the order."
+        )
+    batch = H.shape[:-1]
+    size = math.prod(batch)
+    omega = _check_finite(omega, "omega", "Remove those frequency points.")
+    om_c = _concrete(omega)
+    if om_c is not None and (np.any(om_c < 0) or not np.any(om_c > 0)):
+        raise ValueError(
+            "fit_rational: omega must be >= 0 with at least one positive value [rad/s]; "
+            "the response at -w is the complex conjugate of the one at w."
+        )
+    H = _check_finite(H, "H", "Drop those frequency points (or give them zero weight).")
+
+    if weights is None:
+        w2 = jnp.ones((n_freq,), jnp.float64)
+    else:
+        w = jnp.asarray(weights)
+        if jnp.iscomplexobj(w):
+            raise TypeError("fit_rational: weights must be real and non-negative.")
+        try:
+            shape = jnp.broadcast_shapes(w.shape, H.shape)
+        except ValueError:
+            shape = None
+        if shape != H.shape:
+            raise ValueError(
+                f"fit_rational: weights of shape {w.shape} do not broadcast to H's shape "
+                f"{H.shape}; give (freq,) or (*batch, freq)."
+            )
+        w = _check_finite(w.astype(jnp.float64), "weights", "Use 0 to drop a point.")
+        w_c = _concrete(w)
+        if w_c is not None and np.any(w_c < 0):
+            raise ValueError("fit_rational: weights must be non-negative (0 drops a point).")
+        w2 = w**2
+        if w2.ndim > 1:
+            w2 = jnp.broadcast_to(w2, H.shape).reshape(size, n_freq)
+    h = H.reshape(size, n_freq)
+
+    init_theta = None
+    if init is not None:
+        if not isinstance(init, RationalTF):
+            raise TypeError(f"fit_rational: init must be a RationalTF; got {type(init).__name__}.")
+        if init.num.shape[-1] != nb + 1 or init.den.shape[-1] != na + 1:
+            raise ValueError(
+                f"fit_rational: init has orders ({init.num.shape[-1] - 1}, "
+                f"{init.den.shape[-1] - 1}), but order = {(nb, na)}; give an initial model "
+                "of the orders being fitted."
+            )
+        if init.batch_shape not in ((), batch):
+            raise ValueError(
+                f"fit_rational: init has batch shape {init.batch_shape}; it must be "
+                f"unbatched or match H's batch shape {batch}."
+            )
+        init_theta = _init_theta(omega, init, nb, na, batch, size)
+
+    num, den, report = _fit_batch(
+        omega, h, w2, init_theta, nb, na, bool(stable), int(max_steps), int(sk_steps),
+        float(rtol), bool(throw),
+    )
+    model = RationalTF(num.reshape(batch + (nb + 1,)), den.reshape(batch + (na + 1,)))
+    report = jax.tree_util.tree_map(
+        lambda x: x if x.ndim == 0 else x.reshape(batch + x.shape[1:]), report
+    )
+    return model, report
+
+
+def _init_theta(omega, init: RationalTF, nb: int, na: int, batch, size) -> Array:
+    """θ (ascending, scaled by ω0, monic) of a user's initial model."""
+    positive = omega > 0
+    lo = jnp.min(jnp.where(positive, omega, jnp.inf))
+    w0 = jnp.sqrt(lo * jnp.max(omega))
+    num = jnp.broadcast_to(init.num.astype(jnp.float64), batch + (nb + 1,)).reshape(size, -1)
+    den = jnp.broadcast_to(init.den.astype(jnp.float64), batch + (na + 1,)).reshape(size, -1)
+    num, den = num / den[:, :1], den / den[:, :1]
+    beta = num[:, ::-1] / w0 ** (na - jnp.arange(nb + 1))
+    alpha = den[:, 1:][:, ::-1] / w0 ** (na - jnp.arange(na))
+    return jnp.concatenate([beta, alpha], axis=1)

@@ -1,0 +1,682 @@
+"""Residuals of a calibration: what "the model fits the experiment" means, as a vector.
+
+A residual is a small `eqx.Module` with two methods:
+
+- `prepare(data)` (plain Python, runs once before the solve): turns the user's data
+  object -- a `jaxvs.data.Record`, a `jaxvs.data.FRFData`, a mapping of arrays -- into a
+  validated pytree of arrays. Shape errors raise `ValueError`/`TypeError` here; values
+  (NaN/inf) are checked eagerly when concrete and with `eqx.error_if` under `jit`.
+- `__call__(model, data)` (pure, runs inside the solver): the real residual vector, one
+  entry per measured value, already weighted. Complex errors are returned as real and
+  imaginary parts.
+
+User callbacks follow optimistix: a function of `(model, data)`, data passed as an
+argument rather than captured in a closure.
+"""
+
+import abc
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Literal
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, PyTree
+
+from ..models import AbstractLinearModel, frequency_response, map_batch
+
+__all__ = [
+    "AbstractResidual",
+    "EquationError",
+    "ExcitationWarning",
+    "FrequencyError",
+    "Joint",
+    "PredictionError",
+    "SimulationError",
+]
+
+
+class ExcitationWarning(UserWarning):
+    """The experiment's input does not excite the dynamics to be calibrated."""
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _concrete(x: Any) -> np.ndarray | None:
+    """`x` as numpy when concrete, `None` when traced."""
+    if isinstance(x, jax.core.Tracer):
+        return None
+    try:
+        return np.asarray(x)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return None
+
+
+def _check_finite(x: Array, name: str, where: str) -> Array:
+    """Raise on NaN/inf: eagerly with the first bad index, or `eqx.error_if` when traced."""
+    xc = _concrete(x)
+    advice = (
+        "Remove or interpolate the bad samples (e.g. Record.slice / np.interp), or select "
+        "a clean frequency band (FRFData.select)."
+    )
+    if xc is not None:
+        bad = ~np.isfinite(xc)
+        if bad.any():
+            idx = np.unravel_index(int(np.argmax(bad)), xc.shape)
+            raise ValueError(
+                f"{where}: data {name!r} has {int(bad.sum())} non-finite value(s) "
+                f"(first at index {tuple(int(i) for i in idx)}). {advice}"
+            )
+        return x
+    return eqx.error_if(
+        x, ~jnp.all(jnp.isfinite(x)), f"{where}: data {name!r} has NaN or inf. {advice}"
+    )
+
+
+def _lookup(data: Any, name: str, where: str) -> Any:
+    """`data[name]` for mappings and Records, `data.name` for other objects."""
+    try:
+        if isinstance(data, Mapping) or hasattr(data, "__getitem__") and hasattr(data, "names"):
+            return data[name]
+        return getattr(data, name)
+    except (KeyError, AttributeError):
+        have = list(data.keys()) if isinstance(data, Mapping) else getattr(data, "names", None)
+        raise ValueError(
+            f"{where}: the data have no signal {name!r}"
+            + (f" (they have {list(have)})" if have is not None else "")
+            + ". Rename the signal, or tell the residual its name (e.g. "
+            f"{where}(inputs='force', outputs='q'))."
+        ) from None
+
+
+def _has(data: Any, name: str) -> bool:
+    if isinstance(data, Mapping):
+        return name in data
+    if hasattr(data, "names") and hasattr(data, "__contains__"):
+        return name in data
+    return hasattr(data, name)
+
+
+def _as_float_array(x: Any, name: str, where: str) -> Array:
+    x = jnp.asarray(x)
+    if jnp.iscomplexobj(x):
+        raise TypeError(f"{where}: signal {name!r} must be real; got a complex array.")
+    if not jnp.issubdtype(x.dtype, jnp.floating):
+        x = x.astype(jnp.result_type(float))
+    return x
+
+
+def _signals(data: Any, names: str | tuple[str, ...], where: str) -> Array:
+    """One signal `(time,)` or several stacked as `(time, signal)`."""
+    if isinstance(names, str):
+        return _as_float_array(_lookup(data, names, where), names, where)
+    cols = [_as_float_array(_lookup(data, n, where), n, where) for n in names]
+    return jnp.stack(cols, axis=-1)
+
+
+def _sample_time(data: Any, where: str) -> Any:
+    """The sample time [s]: `data.dt`/`data["dt"]`, or from a uniform time vector `t`."""
+    if _has(data, "dt"):
+        dt = _lookup(data, "dt", where)
+    elif _has(data, "t"):
+        t = _lookup(data, "t", where)
+        tc = _concrete(t)
+        if tc is None:
+            raise ValueError(
+                f"{where}: under jit/vmap give the sample time as data['dt'], not only 't'."
+            )
+        if tc.ndim != 1 or tc.shape[0] < 2:
+            raise ValueError(f"{where}: time vector 't' must be 1-D with >= 2 samples.")
+        steps = np.diff(tc)
+        dt = float((tc[-1] - tc[0]) / (tc.shape[0] - 1))
+        # heuristic: the same 1e-3·dt tolerance as jaxvs.data.Record's uniform-time check
+        if not np.all(np.abs(steps - dt) <= 1e-3 * abs(dt)) or dt <= 0:
+            raise ValueError(
+                f"{where}: time vector 't' is not uniform and increasing; resample it "
+                "first (jaxvs.signal) or give 'dt'."
+            )
+    else:
+        raise ValueError(f"{where}: the data need a sample time 'dt' [s] (or a time vector 't').")
+    dtc = _concrete(dt)
+    if dtc is not None:
+        if dtc.shape != () or not np.isfinite(dtc) or dtc <= 0:
+            raise ValueError(
+                f"{where}: the sample time dt must be a positive finite scalar; got {dtc}."
+            )
+        return float(dtc)
+    return dt
+
+
+def _warn_if_constant(u: Array, name: str, where: str) -> None:
+    uc = _concrete(u)
+    if uc is None or uc.size == 0:
+        return
+    span = np.ptp(uc, axis=0)
+    scale = np.maximum(np.max(np.abs(uc), axis=0), np.finfo(float).tiny)
+    # heuristic: an input whose range is below 1e-12 of its size carries no information.
+    if np.any(span <= 1e-12 * scale):
+        warnings.warn(
+            f"{where}: input {name!r} is constant, so it excites only the static gain; the "
+            "dynamic parameters (time constants, frequencies, damping) will not be "
+            "identifiable. Use an exciting input: a PRBS, swept sine or white noise "
+            "(jaxvs.data.prbs / swept_sine / white_noise), or steps between levels.",
+            ExcitationWarning,
+            stacklevel=4,
+        )
+
+
+def _linear_unstable(model: AbstractLinearModel) -> Bool[Array, ""]:
+    """Any pole in the open right half-plane, from the 2x2 blocks of the modal realisation:
+    a real 2x2 block has an eigenvalue with positive real part iff its trace is > 0 or its
+    determinant is < 0 (marginal poles -- integrators, undamped modes -- are accepted)."""
+    a = map_batch(lambda m: m.modal_realisation().a, model)
+    tr = a[..., 0, 0] + a[..., 1, 1]
+    det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+    return jnp.any((tr > 0) | (det < 0))
+
+
+def _real_vector(r: Any) -> Float[Array, " residual"]:
+    """Flatten any pytree of residual arrays to one real vector (complex -> re, im)."""
+    parts = []
+    for leaf in jax.tree_util.tree_leaves(r):
+        leaf = jnp.asarray(leaf)
+        if jnp.iscomplexobj(leaf):
+            parts += [jnp.real(leaf).ravel(), jnp.imag(leaf).ravel()]
+        else:
+            parts.append(leaf.ravel())
+    if not parts:
+        raise ValueError("The residual function returned no arrays.")
+    return jnp.concatenate(parts)
+
+
+# ----------------------------------------------------------------------------- interface
+
+
+class AbstractResidual(eqx.Module):
+    """A residual: `prepare(data)` once, then `residual(model, data)` -> real vector."""
+
+    def prepare(self, data: Any) -> PyTree[Array]:
+        """Validate `data` and return it as a pytree of arrays (default: unchanged)."""
+        return data
+
+    @abc.abstractmethod
+    def __call__(self, model: Any, data: PyTree) -> Float[Array, " residual"]:
+        """Real residual vector of `model` on the prepared `data`."""
+
+    def is_unstable(self, model: Any) -> Bool[Array, ""]:
+        """Whether `model` is an unusable (unstable) initial guess for this residual."""
+        return jnp.asarray(False)
+
+
+# ----------------------------------------------------------------------------- time domain
+
+
+class _TimeResidual(AbstractResidual):
+    """Shared preparation of input/output time series."""
+
+    fn: Callable | None
+    inputs: str | tuple[str, ...] = eqx.field(static=True)
+    outputs: str | tuple[str, ...] = eqx.field(static=True)
+    skip: int = eqx.field(static=True)
+
+    def prepare(self, data: Any) -> dict[str, Any]:
+        where = type(self).__name__
+        if isinstance(data, list | tuple):
+            raise TypeError(
+                f"{where}: got a {type(data).__name__} of data; pass several experiments to "
+                "calibrate as a list, which pairs each with this residual."
+            )
+        u = _signals(data, self.inputs, where)
+        y = _signals(data, self.outputs, where)
+        dt = _sample_time(data, where)
+        if u.ndim == 0 or y.ndim == 0 or u.shape[0] != y.shape[0]:
+            raise ValueError(
+                f"{where}: input {self.inputs!r} {u.shape} and output {self.outputs!r} "
+                f"{y.shape} must have the same number of samples (time axis first)."
+            )
+        if not 0 <= self.skip < y.shape[0]:
+            raise ValueError(
+                f"{where}: skip={self.skip} leaves no samples of the {y.shape[0]} measured."
+            )
+        u = _check_finite(u, str(self.inputs), where)
+        y = _check_finite(y, str(self.outputs), where)
+        _warn_if_constant(u, str(self.inputs), where)
+        prepared = {"u": u, "y": y, "dt": dt}
+        if _has(data, "x0"):
+            prepared["x0"] = jnp.asarray(_lookup(data, "x0", where))
+        return prepared
+
+    def is_unstable(self, model: Any) -> Bool[Array, ""]:
+        if self.fn is None and isinstance(model, AbstractLinearModel):
+            return _linear_unstable(model)
+        return jnp.asarray(False)
+
+    def _compare(self, y_hat: Array, y: Array, start: int) -> Array:
+        if y_hat.shape != y.shape:
+            raise ValueError(
+                f"{type(self).__name__}: the model predicts shape {y_hat.shape} but the "
+                f"measured output has shape {y.shape}; check the number of outputs, or "
+                "reshape the prediction in your `fn`."
+            )
+        return (y_hat - y)[start:].ravel()
+
+
+class SimulationError(_TimeResidual):
+    r"""Output (simulation) error: simulate the model on the measured input from rest and
+    compare with the measured output, `r_k = ŷ_k - y_k` for `k >= skip`.
+
+    This is the output-error criterion of system identification (Ljung, *System
+    Identification*, 2nd ed., 1999, §4.2, eq. 4.25): unbiased under white output noise,
+    but the residual is a nonlinear function of every dynamic parameter.
+
+    **Arguments:**
+
+    - `fn`: optional `fn(model, data) -> ŷ` giving the simulated output (`data` is the
+      prepared dict with `"u"`, `"y"`, `"dt"`). Default: `jaxvs.simulate(model, u, dt,
+      method=method)` for linear models, otherwise `model.simulate(u, dt)` (implement
+      that method on your `eqx.Module`, e.g. a diffrax ODE solve).
+    - `inputs`, `outputs`: signal name(s) in the data (default `"u"` and `"y"`); a tuple
+      of names stacks them as `(time, signal)`.
+    - `method`: discretisation of `jaxvs.simulate` (`"zoh"`, `"tustin"`, `"euler"`,
+      `"heun"`).
+    - `skip`: number of initial samples excluded, e.g. an unmodelled start-up transient.
+
+    Data: a `jaxvs.data.Record` or a mapping with the signals, and the sample time `dt`
+    [s] (or a uniform time vector `t`); optionally `x0` for `model.simulate`-style models.
+    """
+
+    method: str = eqx.field(static=True)
+
+    def __init__(
+        self,
+        fn: Callable | None = None,
+        *,
+        inputs: str | tuple[str, ...] = "u",
+        outputs: str | tuple[str, ...] = "y",
+        method: Literal["zoh", "tustin", "euler", "heun"] = "zoh",
+        skip: int = 0,
+    ):
+        self.fn, self.inputs, self.outputs, self.skip = fn, inputs, outputs, int(skip)
+        self.method = method
+
+    def __call__(self, model: Any, data: PyTree) -> Float[Array, " residual"]:
+        if self.fn is not None:
+            y_hat = self.fn(model, data)
+        elif isinstance(model, AbstractLinearModel):
+            try:
+                from ..models import simulate
+            except ImportError as e:  # pragma: no cover - depends on the build state
+                raise TypeError(
+                    "SimulationError: jaxvs.simulate is not available in this build; give "
+                    "fn=... to simulate the model yourself."
+                ) from e
+            y_hat = simulate(model, data["u"], data["dt"], method=self.method)
+        elif hasattr(model, "simulate"):
+            y_hat = model.simulate(data["u"], data["dt"])
+        else:
+            raise TypeError(
+                f"SimulationError: do not know how to simulate a {type(model).__name__}. "
+                "Give fn=lambda model, data: ... (returning the simulated output), or give "
+                "the module a method simulate(u, dt)."
+            )
+        return self._compare(jnp.asarray(y_hat), data["y"], self.skip)
+
+
+def _faddeev_leverrier(a: Float[Array, "n n"]) -> Float[Array, " n1"]:
+    """Characteristic polynomial `det(zI - A)` (highest power first, monic).
+
+    Faddeev-LeVerrier recursion (Gantmacher, *The Theory of Matrices*, Vol. 1, §IV.4):
+    `M_k = A M_{k-1} + c_{k-1} I`, `c_k = -tr(A M_k) / k`. Matrix products only, so it is
+    differentiable everywhere (unlike eigenvalues at repeated roots). Used on discrete
+    matrices with spectral radius <= 1, where it keeps its digits at the orders here.
+    """
+    n = a.shape[0]
+    eye = jnp.eye(n, dtype=a.dtype)
+    coeffs = [jnp.ones((), a.dtype)]
+    m = jnp.zeros_like(a)
+    for k in range(1, n + 1):
+        m = a @ m + coeffs[-1] * eye
+        coeffs.append(-jnp.trace(a @ m) / k)
+    return jnp.stack(coeffs)
+
+
+# Padé (7, 7) coefficients of exp (Higham, "The scaling and squaring method for the matrix
+# exponential revisited", SIAM J. Matrix Anal. Appl. 26, 2005, Table 2.3).
+_PADE7 = (17297280.0, 8648640.0, 1995840.0, 277200.0, 25200.0, 1512.0, 56.0, 1.0)
+
+
+def _expm(m: Float[Array, "n n"]) -> Float[Array, "n n"]:
+    """Matrix exponential of a small matrix by scaling and squaring with Padé (7, 7).
+
+    The scaled matrix has 1-norm <= 0.5, well inside the range where Padé (7, 7) is
+    accurate to unit roundoff (θ_7 = 0.95, Higham 2005). Unlike `jax.scipy.linalg.expm`
+    it has one fixed branch, so it compiles quickly under `jacfwd` and inside solver
+    loops; the squarings are a fixed-length loop (masked), so reverse mode works too.
+    """
+    n = m.shape[0]
+    norm = jnp.max(jnp.sum(jnp.abs(m), axis=0))
+    s = jnp.clip(jnp.ceil(jnp.log2(jnp.maximum(norm, 1e-300) / 0.5)), 0, 60)
+    x = m / 2.0**s
+    eye = jnp.eye(n, dtype=m.dtype)
+    x2 = x @ x
+    x4 = x2 @ x2
+    x6 = x4 @ x2
+    b = _PADE7
+    u = x @ (b[7] * x6 + b[5] * x4 + b[3] * x2 + b[1] * eye)
+    v = b[6] * x6 + b[4] * x4 + b[2] * x2 + b[0] * eye
+    e = jnp.linalg.solve(v - u, v + u)
+    return jax.lax.fori_loop(0, 60, lambda i, e: jnp.where(i < s, e @ e, e), e)
+
+
+def _arx_form(model: AbstractLinearModel, dt: Any) -> tuple[Array, Array]:
+    """`(a, b)` of the ZOH-discretised SISO model `B(q⁻¹)/A(q⁻¹)`, `a_0 = 1`.
+
+    ZOH: `exp([[A, B], [0, 0]] dt) = [[A_d, B_d], [0, I]]` (Franklin, Powell, Workman,
+    *Digital Control of Dynamic Systems*, 3rd ed., §6.3). `A(z)` is the characteristic
+    polynomial of `A_d`; `B` follows from the Markov parameters `h_0 = D`,
+    `h_k = C A_d^{k-1} B_d` through `B(q⁻¹) = A(q⁻¹) H(q⁻¹)` truncated at degree `n`.
+    """
+    ss = model.to_state_space()
+    A, B, C, D = ss.A, ss.B, ss.C, ss.D
+    n = A.shape[0]
+    aug = jnp.zeros((n + 1, n + 1), A.dtype).at[:n, :n].set(A).at[:n, n:].set(B)
+    e = _expm(aug * dt)
+    ad, bd = e[:n, :n], e[:n, n:]
+    a = _faddeev_leverrier(ad)
+    h = [D[0, 0]]
+    x = bd
+    for _ in range(n):
+        h.append((C @ x)[0, 0])
+        x = ad @ x
+    h = jnp.stack(h)
+    b = jnp.stack([jnp.sum(a[: j + 1] * h[j::-1]) for j in range(n + 1)])
+    return a, b
+
+
+class PredictionError(_TimeResidual):
+    r"""One-step-ahead prediction error, `r_k = y_k - ŷ(k | k-1)`.
+
+    **What "one step" means for a continuous-time model.** A linear model is first
+    discretised exactly for piecewise-constant inputs (zero-order hold at the data's `dt`),
+    `y_k = B(q⁻¹)/A(q⁻¹) u_k`, `A(q⁻¹) = 1 + a_1 q⁻¹ + ... + a_n q⁻ⁿ`. The one-step-ahead
+    predictor is then that of the ARX (equation-error) noise structure, which uses the
+    *measured* past outputs (Ljung 1999, §3.2, eq. 3.45 with `C = 1`, `D = A`):
+
+        ŷ(k | k-1) = -a_1 y_{k-1} - ... - a_n y_{k-n} + b_0 u_k + ... + b_n u_{k-n}.
+
+    The residual starts at `k = max(skip, n)` so that every prediction has its `n` past
+    samples. It is cheap and nearly convex, but biased under output noise -- use
+    [`SimulationError`][] for the final estimate and this one for initialisation or for
+    models that are themselves predictors (NARX / time-delay networks).
+
+    **Arguments:**
+
+    - `fn`: optional `fn(model, data) -> ŷ` (same shape as `y`, `ŷ_k` a prediction from
+      data before `k`). Default: the discretised ARX predictor above for SISO linear
+      models, otherwise `model.predict(u, y, dt)`.
+    - `inputs`, `outputs`, `skip`: as for [`SimulationError`][].
+    """
+
+    def __init__(
+        self,
+        fn: Callable | None = None,
+        *,
+        inputs: str | tuple[str, ...] = "u",
+        outputs: str | tuple[str, ...] = "y",
+        skip: int = 0,
+    ):
+        self.fn, self.inputs, self.outputs, self.skip = fn, inputs, outputs, int(skip)
+
+    def __call__(self, model: Any, data: PyTree) -> Float[Array, " residual"]:
+        u, y = data["u"], data["y"]
+        start = self.skip
+        if self.fn is not None:
+            y_hat = self.fn(model, data)
+        elif isinstance(model, AbstractLinearModel):
+            if not model.is_siso or u.ndim != 1 or y.ndim != 1:
+                raise ValueError(
+                    "PredictionError: the built-in predictor is for SISO linear models "
+                    "with 1-D u and y; give fn=... for other models."
+                )
+            a, b = _arx_form(model, data["dt"])
+            n = a.shape[0] - 1
+            if y.shape[0] <= n + self.skip:
+                raise ValueError(
+                    f"PredictionError: {y.shape[0]} samples are too few for a predictor of "
+                    f"order {n} (it needs {n} past samples); record more data."
+                )
+            # ŷ_k = Σ_j b_j u_{k-j} - Σ_{i>=1} a_i y_{k-i}, zero before the record (k < n is
+            # then excluded from the residual).
+            t = y.shape[0]
+            conv_b = jnp.convolve(u, b)[:t]
+            conv_a = jnp.convolve(y, a)[:t] - y  # Σ_{i>=1} a_i y_{k-i}
+            y_hat = conv_b - conv_a
+            start = max(self.skip, n)
+        elif hasattr(model, "predict"):
+            y_hat = model.predict(u, y, data["dt"])
+        else:
+            raise TypeError(
+                f"PredictionError: {type(model).__name__} has no one-step predictor; give "
+                "fn=lambda model, data: ... or a method predict(u, y, dt)."
+            )
+        return self._compare(jnp.asarray(y_hat), y, start)
+
+
+# ----------------------------------------------------------------------------- frequency
+
+
+class FrequencyError(AbstractResidual):
+    r"""Complex frequency-response error `w(ω) (G(jω) - H(ω))`, as real and imaginary parts.
+
+    **Arguments:**
+
+    - `fn`: optional `fn(model, data) -> G` (complex, shaped like `H`; `data["omega"]`
+      [rad/s]). Default: `jaxvs.frequency_response(model, omega)` for linear models,
+      otherwise `model.frequency_response(omega)`.
+    - `weighting`:
+        - `None` (default): `w = 1` (absolute error, dominated by resonance peaks);
+        - `"relative"`: `w = 1/|H|` (relative error, every decade counts);
+        - `"coherence"`: `w = sqrt(γ² / (1 - γ²)) / |H|`, i.e. one over the standard
+          deviation of an H1 estimate up to a constant (Bendat & Piersol, *Random Data*,
+          4th ed., 2010, eq. 9.90: `σ(|H|)/|H| ≈ sqrt((1 - γ²) / (2 n γ²))`); needs the
+          data's coherence. γ² is clipped to `1 - 1e-6` (heuristic: a perfect coherence
+          would give an infinite weight).
+
+    Data: a `jaxvs.data.FRFData`, or a mapping with `"omega"` [rad/s] (or `"frequency"`
+    [Hz]) and complex `"H"` `(freq,)` / `(freq, out, in)`; optionally `"coherence"` and
+    `"weights"` (real, shaped like `H`, multiplied into `w`).
+    """
+
+    fn: Callable | None = None
+    weighting: Literal["relative", "coherence"] | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        if self.weighting not in (None, "relative", "coherence"):
+            raise ValueError(
+                f"FrequencyError: weighting must be None, 'relative' or 'coherence'; got "
+                f"{self.weighting!r}."
+            )
+
+    def prepare(self, data: Any) -> dict[str, Array]:
+        where = "FrequencyError"
+        if isinstance(data, list | tuple):
+            raise TypeError(
+                f"{where}: got a {type(data).__name__}; give an FRFData or a mapping with "
+                "'omega' and 'H'. Several experiments go to calibrate as a list."
+            )
+        if _has(data, "omega"):
+            omega = _as_float_array(_lookup(data, "omega", where), "omega", where)
+        elif _has(data, "frequency"):
+            omega = (
+                2 * jnp.pi * _as_float_array(_lookup(data, "frequency", where), "frequency", where)
+            )
+        else:
+            raise ValueError(f"{where}: the data need 'omega' [rad/s] or 'frequency' [Hz].")
+        H = jnp.asarray(_lookup(data, "H", where))
+        if not jnp.iscomplexobj(H):
+            H = H.astype(jnp.result_type(H.dtype, jnp.complex64, float))
+        if omega.ndim != 1 or H.ndim not in (1, 3) or H.shape[0] != omega.shape[0]:
+            raise ValueError(
+                f"{where}: omega {omega.shape} and H {H.shape} do not match; expected omega "
+                "(freq,) and H (freq,) or (freq, out, in). Calibrate families with "
+                "calibrate_family."
+            )
+        omega = _check_finite(omega, "omega", where)
+        H = _check_finite(H, "H", where)
+        w = jnp.ones(H.shape, omega.dtype)
+        if self.weighting is not None:
+            mag = jnp.abs(H)
+            magc = _concrete(mag)
+            if magc is not None and np.any(magc == 0):
+                raise ValueError(
+                    f"{where}: weighting={self.weighting!r} divides by |H|, which is 0 at "
+                    "some frequencies; drop those frequencies or use weighting=None."
+                )
+            w = w / mag
+        if self.weighting == "coherence":
+            coh = _lookup(data, "coherence", where) if _has(data, "coherence") else None
+            if coh is None:
+                raise ValueError(
+                    f"{where}: weighting='coherence' needs the data's coherence; estimate "
+                    "the FRF with jaxvs.signal (which returns it) or choose another weighting."
+                )
+            coh = jnp.clip(jnp.asarray(coh, omega.dtype), 0.0, 1.0 - 1e-6)
+            if coh.shape != H.shape:
+                raise ValueError(f"{where}: coherence {coh.shape} must have H's shape {H.shape}.")
+            w = w * jnp.sqrt(coh / (1 - coh))
+        if _has(data, "weights"):
+            uw = _as_float_array(_lookup(data, "weights", where), "weights", where)
+            if uw.shape != H.shape:
+                raise ValueError(f"{where}: weights {uw.shape} must have H's shape {H.shape}.")
+            w = w * _check_finite(uw, "weights", where)
+        return {"omega": omega, "H": H, "w": w}
+
+    def __call__(self, model: Any, data: PyTree) -> Float[Array, " residual"]:
+        omega, H = data["omega"], data["H"]
+        if self.fn is not None:
+            G = self.fn(model, data)
+        elif isinstance(model, AbstractLinearModel):
+            G = frequency_response(model, omega)
+        elif hasattr(model, "frequency_response"):
+            G = model.frequency_response(omega)
+        else:
+            raise TypeError(
+                f"FrequencyError: {type(model).__name__} has no frequency response; give "
+                "fn=lambda model, data: ... or a method frequency_response(omega)."
+            )
+        G = jnp.asarray(G)
+        if G.shape != H.shape:
+            raise ValueError(
+                f"FrequencyError: the model's response has shape {G.shape} but the data H "
+                f"has {H.shape}; match the model's inputs/outputs to the measured FRF."
+            )
+        e = data["w"] * (G - H)
+        return jnp.concatenate([jnp.real(e).ravel(), jnp.imag(e).ravel()])
+
+
+# ----------------------------------------------------------------------------- user / joint
+
+
+class EquationError(AbstractResidual):
+    r"""Equation error from a user function: `r = fn(model, data)` (any pytree of real or
+    complex arrays, flattened; complex as real and imaginary parts).
+
+    The natural residual of inverse-dynamics identification, e.g. the rigid axis
+    `r = M q̈ + Fv q̇ + Fc sign(q̇) + offset - u` evaluated on filtered measured signals
+    (Gautier & Khalil's IDIM-LS, as in the EMPS benchmark), which is linear in the
+    parameters and needs no simulation; or any curve fit `r = f(t; θ) - y`.
+
+    **Arguments:**
+
+    - `fn`: `fn(model, data) -> residuals`; `data` is passed through `prepare` unchanged
+      except that its arrays are checked for NaN/inf.
+    """
+
+    fn: Callable
+
+    def prepare(self, data: Any) -> PyTree:
+        def check(path, x):
+            if eqx.is_array_like(x) and not isinstance(x, bool | int | str):
+                arr = jnp.asarray(x)
+                if jnp.issubdtype(arr.dtype, jnp.inexact):
+                    return _check_finite(arr, jax.tree_util.keystr(path) or "data", "EquationError")
+            return x
+
+        if hasattr(data, "names") and hasattr(data, "to_array"):  # a jaxvs.data.Record
+            data = {"t": data.t, "dt": data.dt, **{n: data[n] for n in data.names}}
+        return jax.tree_util.tree_map_with_path(check, data)
+
+    def __call__(self, model: Any, data: PyTree) -> Float[Array, " residual"]:
+        return _real_vector(self.fn(model, data))
+
+
+class Joint(AbstractResidual):
+    r"""Several residuals of the same model stacked into one problem, each weighted:
+    `r = [w_1 r_1(model, data_1), ..., w_m r_m(model, data_m)]`.
+
+    Use it for several experiments (one residual each) or several domains of the same
+    parameters (time and frequency). With weights `w_i = 1/σ_i` (the noise level of each
+    block) the stacked residual is homoscedastic and the covariance of `calibrate` is
+    the maximum-likelihood one.
+
+    **Arguments:**
+
+    - `residuals`: a sequence of residuals; the data are then a list of the same length.
+    - `weights`: `None` (all 1), a sequence of scalars or arrays (broadcast against each
+      block's residual vector), or `"size"`: `w_i = 1/sqrt(N_i)` so that each block
+      counts by its mean square, whatever its number of samples `N_i`.
+    """
+
+    residuals: tuple[AbstractResidual, ...]
+    weights: Any
+
+    def __init__(self, residuals: Sequence[AbstractResidual], weights: Any = None):
+        residuals = tuple(residuals)
+        if not residuals or not all(isinstance(r, AbstractResidual) for r in residuals):
+            raise TypeError(
+                "Joint: give a non-empty sequence of residuals (SimulationError, "
+                "FrequencyError, EquationError, ...)."
+            )
+        if weights is not None and not isinstance(weights, str):
+            weights = tuple(weights)
+            if len(weights) != len(residuals):
+                raise ValueError(
+                    f"Joint: {len(weights)} weights for {len(residuals)} residuals; give one "
+                    "weight per residual."
+                )
+            weights = tuple(jnp.asarray(w) for w in weights)
+        elif isinstance(weights, str) and weights != "size":
+            raise ValueError(f"Joint: weights must be None, a sequence or 'size'; got {weights!r}.")
+        self.residuals, self.weights = residuals, weights
+
+    def prepare(self, data: Any) -> tuple:
+        if not isinstance(data, list | tuple) or len(data) != len(self.residuals):
+            n = len(data) if isinstance(data, list | tuple) else "one"
+            raise ValueError(
+                f"Joint: {len(self.residuals)} residuals need a list of "
+                f"{len(self.residuals)} data objects (one per residual); got {n}."
+            )
+        return tuple(r.prepare(d) for r, d in zip(self.residuals, data))
+
+    def is_unstable(self, model: Any) -> Bool[Array, ""]:
+        return jnp.any(jnp.stack([r.is_unstable(model) for r in self.residuals]))
+
+    def __call__(self, model: Any, data: PyTree) -> Float[Array, " residual"]:
+        blocks = []
+        for i, (res, d) in enumerate(zip(self.residuals, data)):
+            r = res(model, d)
+            if self.weights == "size":
+                r = r / jnp.sqrt(r.shape[0])
+            elif self.weights is not None:
+                w = self.weights[i]
+                if w.ndim > 0 and w.shape != r.shape:
+                    raise ValueError(
+                        f"Joint: weight {i} has shape {w.shape} but residual {i} has "
+                        f"{r.shape}; give a scalar or one weight per residual entry."
+                    )
+                r = r * w
+            blocks.append(r)
+        return jnp.concatenate(blocks)

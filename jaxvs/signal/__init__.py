@@ -1,0 +1,23 @@
+"""Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows."""
+
+from ._spectral import (
+    coherence as coherence,
+    csd as csd,
+    frf_h1 as frf_h1,
+    frf_h2 as frf_h2,
+    frf_hv as frf_hv,
+    psd as psd,
+    transmissibility as transmissibility,
+)
+from ._windows import (
+    WINDOW_NAMES as WINDOW_NAMES,
+    boxcar as boxcar,
+    exponential_window as exponential_window,
+    exponential_window_correction as exponential_window_correction,
+    flattop as flattop,
+    force_window as force_window,
+    get_window as get_window,
+    hamming as hamming,
+    hann as hann,
+    impact_windows as impact_windows,
+)
