@@ -4,6 +4,7 @@ Oracles: python-control (`tf`, `ss`, `poles`, `zeros`, `dcgain`, `damp`), scipy.
 (`tf2zpk`, `freqs`, `ss2tf`, `invres`, `tf2ss`, `cont2discrete`) and closed forms.
 """
 
+import control
 import equinox as eqx
 import hypothesis.strategies as st
 import jax
@@ -11,12 +12,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.signal as sig
+from helpers import LINEAR_MODELS, random_modal
 from hypothesis import given, settings
 from jax.test_util import check_grads
 
-import control
 import jaxvs
-from helpers import LINEAR_MODELS, random_modal
 from jaxvs.models import (
     acceleration_to_position,
     acceleration_to_position_frf,
@@ -34,8 +34,11 @@ from jaxvs.models import (
 W = np.logspace(0, 4, 200)
 
 
+_frequency_response = eqx.filter_jit(jaxvs.frequency_response)  # one compile per structure
+
+
 def frf(model, w=W):
-    return np.asarray(jaxvs.frequency_response(model, w))
+    return np.asarray(_frequency_response(model, jnp.asarray(w)))
 
 
 def rel_err(h, ref):
@@ -104,8 +107,8 @@ def test_round_trips_registry(name, factory):
     assert rel_err(h, g) < 1e-9  # freqs evaluates unscaled polynomials: a few more digits lost
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-@pytest.mark.parametrize("n_modes", [4, 5, 6])
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("n_modes", [4, 6])
 def test_to_rational_matches_invres_at_high_order(seed, n_modes):
     m = spread_modal(np.random.default_rng(seed), n_modes)
     lam, res = exact_poles_residues(m)
@@ -121,18 +124,30 @@ def test_to_rational_matches_invres_at_high_order(seed, n_modes):
     w0 = np.prod(np.abs(p)) ** (1 / n)
     sc = w0 ** -np.arange(n + 1)
     den_ref = np.real(den_ref / den_ref[0])
-    num_ref = np.concatenate([np.zeros(n + 1 - len(num_ref)), np.real(num_ref)]) / 1.0
-    np.testing.assert_allclose(den * sc, den_ref * sc, rtol=0, atol=1e-10 * np.max(np.abs(den * sc)))
-    np.testing.assert_allclose(num * sc, num_ref * sc, rtol=0, atol=1e-10 * np.max(np.abs(num * sc)))
+    num_ref = np.concatenate([np.zeros(n + 1 - len(num_ref)), np.real(num_ref)])
+    np.testing.assert_allclose(
+        den * sc, den_ref * sc, rtol=0, atol=1e-10 * np.max(np.abs(den * sc))
+    )
+    np.testing.assert_allclose(
+        num * sc, num_ref * sc, rtol=0, atol=1e-10 * np.max(np.abs(num * sc))
+    )
+    # scipy.signal.ss2tf of the dense modal state space: a second oracle (poly(A) for den,
+    # poly(A - BC) - poly(A) for num, which cancels digits: 1e-9 in scaled frequency)
+    ss = m.to_state_space()
+    num2, den2 = sig.ss2tf(*(np.asarray(x) for x in (ss.A, ss.B, ss.C, ss.D)))
+    np.testing.assert_allclose(den * sc, den2 * sc, rtol=0, atol=1e-9 * np.max(np.abs(den * sc)))
+    np.testing.assert_allclose(num * sc, num2[0] * sc, rtol=0, atol=1e-9 * np.max(np.abs(num * sc)))
     # Response of the coefficients against the exact modal response, point by point
     # (relative to |G| at each frequency, anti-resonances included). Measured: 2e-14..5e-14
-    # for ours, 1e-13..6e-13 for scipy's ss2tf (poly(A - BC) - poly(A) cancels digits).
+    # for ours, 1e-13..6e-13 for the ss2tf coefficients.
     w = np.geomspace(2 * np.pi * 3, 2 * np.pi * 3000, 1000)
     g = frf(m, w)
     assert np.max(np.abs(frf(r, w) - g) / np.abs(g)) < 1e-11
+    g2 = frf(jaxvs.RationalTF(jnp.asarray(num2[0]), jnp.asarray(den2)), w)
+    assert np.max(np.abs(g2 - g) / np.abs(g)) < 1e-9  # the oracle's own accuracy
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("n_modes", [5, 6])
 def test_block_realisation_keeps_digits_where_companion_loses_them(seed, n_modes):
     """Order 10-12: ZOH impulse responses of two realisations of the same coefficients.
@@ -181,6 +196,16 @@ def test_mimo_state_space_to_modal():
     assert to_modal(simo).residues.shape == (3, 3)
     with pytest.raises(ValueError, match="single-input single-output"):
         to_rational(mimo)
+    # The dense realisation of a MIMO ModalModel repeats every pole pair once per input
+    # (bitwise-equal eigenvalues): the block realisation must still pair λ with λ̄.
+    mimo_modal = jaxvs.ModalModel(
+        jnp.array([10.0, 30.0]), jnp.array([0.1, 0.2]), jnp.arange(1, 9.0).reshape(2, 2, 2)
+    )
+    dense = mimo_modal.to_state_space()
+    assert rel_err(frf(to_modal(dense)), frf(mimo_modal)) < 1e-12  # rounding only
+    r = dense.modal_realisation()
+    g_blocks = np.asarray(r.response(jnp.asarray(1j * W)))
+    assert rel_err(g_blocks, frf(mimo_modal)) < 1e-12
 
 
 def test_to_modal_residue_kinds():
@@ -272,19 +297,31 @@ def test_analysis_closed_forms_and_edge_cases():
     np.testing.assert_allclose(np.asarray(wn), [0.0, 3.0], atol=1e-14)
     np.testing.assert_allclose(np.asarray(z), [-1.0, 1.0], atol=1e-14)
     assert not bool(is_stable(integ))
-    ss_int = jaxvs.StateSpace(jnp.zeros((1, 1)), jnp.ones((1, 1)), jnp.ones((1, 1)), jnp.zeros((1, 1)))
+    ss_int = jaxvs.StateSpace(
+        jnp.zeros((1, 1)), jnp.ones((1, 1)), jnp.ones((1, 1)), jnp.zeros((1, 1))
+    )
     assert not np.isfinite(float(static_gain(ss_int)))
     # unstable and marginally stable
     assert not bool(is_stable(jaxvs.RationalTF(jnp.array([1.0]), jnp.array([1.0, -1.0, 4.0]))))
-    assert not bool(is_stable(jaxvs.ModalModel(jnp.array([10.0]), jnp.array([0.0]), jnp.array([1.0]))))
+    assert not bool(
+        is_stable(jaxvs.ModalModel(jnp.array([10.0]), jnp.array([0.0]), jnp.array([1.0])))
+    )
     # ModalModel poles: closed form including over- and critically damped modes
     m = jaxvs.ModalModel(jnp.array([10.0, 20.0, 40.0]), jnp.array([0.1, 1.0, 2.0]), jnp.ones(3))
-    p_ref = np.concatenate([np.roots([1.0, 2 * zz * ww, ww**2]) for ww, zz in [(10, 0.1), (20, 1.0), (40, 2.0)]])
-    np.testing.assert_allclose(np.asarray(poles(m)), sorted_c(p_ref), rtol=1e-7)  # double root at -20: sqrt(eps)
+    p_ref = np.concatenate(
+        [np.roots([1.0, 2 * zz * ww, ww**2]) for ww, zz in [(10, 0.1), (20, 1.0), (40, 2.0)]]
+    )
+    np.testing.assert_allclose(
+        np.asarray(poles(m)), sorted_c(p_ref), rtol=1e-7
+    )  # double root at -20: sqrt(eps)
     # static gain of a MIMO model: (out, in) like dcgain
-    mimo = jaxvs.ModalModel(jnp.array([10.0, 30.0]), jnp.array([0.1, 0.2]), jnp.arange(8.0).reshape(2, 2, 2))
+    mimo = jaxvs.ModalModel(
+        jnp.array([10.0, 30.0]), jnp.array([0.1, 0.2]), jnp.arange(8.0).reshape(2, 2, 2)
+    )
     g0 = np.asarray(static_gain(mimo))
-    np.testing.assert_allclose(g0, np.asarray(mimo.residues)[0] / 100 + np.asarray(mimo.residues)[1] / 900, rtol=1e-14)
+    np.testing.assert_allclose(
+        g0, np.asarray(mimo.residues)[0] / 100 + np.asarray(mimo.residues)[1] / 900, rtol=1e-14
+    )
     np.testing.assert_allclose(g0, control.dcgain(control_ss(mimo)), rtol=1e-10)
     # zeros at infinity of a strictly proper rational, and a zero at the origin
     z = np.asarray(zeros(jaxvs.RationalTF(jnp.array([0.0, 2.0, 0.0]), jnp.array([1.0, 3.0, 2.0]))))
@@ -294,8 +331,17 @@ def test_analysis_closed_forms_and_edge_cases():
 def test_analysis_on_families():
     rng = np.random.default_rng(7)
     members = [random_modal(rng, 3) for _ in range(4)]
-    fam = jaxvs.ModalModel(*(jnp.stack([getattr(m, k) for m in members]) for k in ("omega_n", "zeta", "residues")))
-    for fn in (poles, zeros, static_gain, is_stable, lambda m: damping(m)[1], lambda m: to_rational(m).num):
+    fam = jaxvs.ModalModel(
+        *(jnp.stack([getattr(m, k) for m in members]) for k in ("omega_n", "zeta", "residues"))
+    )
+    for fn in (
+        poles,
+        zeros,
+        static_gain,
+        is_stable,
+        lambda m: damping(m)[1],
+        lambda m: to_rational(m).num,
+    ):
         out = np.asarray(fn(fam))
         for i, m in enumerate(members):
             np.testing.assert_allclose(out[i], np.asarray(fn(m)), rtol=1e-12)  # same arithmetic
@@ -314,7 +360,7 @@ def test_analysis_on_families():
 
 
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1), n_modes=st.integers(1, 6))
+@given(seed=st.integers(0, 2**31 - 1), n_modes=st.sampled_from([1, 3, 5]))
 def test_property_conversions_agree(seed, n_modes):
     rng = np.random.default_rng(seed)
     m = random_modal(rng, n_modes)
@@ -326,7 +372,9 @@ def test_property_conversions_agree(seed, n_modes):
     assert rel_err(frf(to_modal(r)), g) < 1e-8
     np.testing.assert_allclose(np.asarray(poles(r)), np.asarray(poles(m)), rtol=1e-6)
     np.testing.assert_allclose(float(static_gain(r)), float(static_gain(m)), rtol=1e-8)
-    np.testing.assert_allclose(float(static_gain(m)), np.real(frf(m, np.array([0.0]))[0]), rtol=1e-12)
+    np.testing.assert_allclose(
+        float(static_gain(m)), np.real(frf(m, np.array([0.0]))[0]), rtol=1e-12
+    )
     wn, z = damping(m)
     np.testing.assert_allclose(np.asarray(wn)[::2], np.sort(np.asarray(m.omega_n)), rtol=1e-12)
     assert bool(is_stable(r)) and bool(is_stable(m))
@@ -342,7 +390,11 @@ def test_position_acceleration_models():
     m = random_modal(rng, 3)  # a receptance: real modal constants, relative degree 2
     s = 1j * W
     g = frf(m)
-    for model in (m, m.to_state_space(), jaxvs.RationalTF(to_rational(m).num[2:], to_rational(m).den)):
+    for model in (
+        m,
+        m.to_state_space(),
+        jaxvs.RationalTF(to_rational(m).num[2:], to_rational(m).den),
+    ):
         acc = position_to_acceleration(model)
         assert type(acc) is type(model)
         assert rel_err(frf(acc), s**2 * g) < 1e-10  # exact algebra, rounding only
@@ -381,7 +433,9 @@ def test_tmf_of_accelerations_equals_tmf_of_positions():
     np.testing.assert_allclose(Aa[:, 0] / Aa[:, 1], T_pos, rtol=1e-13)
     np.testing.assert_allclose(Aa, Ha, rtol=1e-9)
     # integrating the accelerations back gives the receptances
-    np.testing.assert_allclose(np.asarray(acceleration_to_position_frf(Aa, w, axis=0)), Hx, rtol=1e-14)
+    np.testing.assert_allclose(
+        np.asarray(acceleration_to_position_frf(Aa, w, axis=0)), Hx, rtol=1e-14
+    )
 
 
 def test_frf_conversions_closed_form_and_batches():
@@ -415,10 +469,14 @@ def _relative_check(fn, params):
     def f(thetas):
         scaled = [x * (1 + t) for x, t in zip(leaves, thetas)]
         out = fn(jax.tree_util.tree_unflatten(tree, scaled))
-        return jnp.concatenate([out.real.ravel(), out.imag.ravel()]) if jnp.iscomplexobj(out) else out
+        return (
+            jnp.concatenate([out.real.ravel(), out.imag.ravel()]) if jnp.iscomplexobj(out) else out
+        )
 
     thetas = [jnp.zeros_like(x, dtype=jnp.result_type(x.real.dtype)) for x in leaves]
-    check_grads(jax.jit(f), (thetas,), order=1, modes=("fwd", "rev"), eps=1e-6, atol=1e-6, rtol=1e-6)
+    check_grads(
+        jax.jit(f), (thetas,), order=1, modes=("fwd", "rev"), eps=1e-6, atol=1e-6, rtol=1e-6
+    )
 
 
 @pytest.mark.parametrize("name,factory", LINEAR_MODELS)
@@ -434,6 +492,7 @@ def test_gradients_of_frequency_response(name, factory):
     _relative_check(fn, arrays)
 
 
+@pytest.mark.slow  # ~15 s of compilation (derivatives of eig and roots, both modes)
 def test_gradients_through_conversions_and_analysis():
     rng = np.random.default_rng(13)
     m = random_modal(rng, 3)
@@ -445,7 +504,9 @@ def test_gradients_through_conversions_and_analysis():
         return jaxvs.frequency_response(to_rational(eqx.combine(p, static)), w) / scale
 
     def via_modal_complex(p):
-        return jaxvs.frequency_response(to_modal(eqx.combine(p, static).to_state_space()), w) / scale
+        return (
+            jaxvs.frequency_response(to_modal(eqx.combine(p, static).to_state_space()), w) / scale
+        )
 
     def pole_values(p):
         return poles(to_rational(eqx.combine(p, static))) / 1e3
@@ -453,8 +514,11 @@ def test_gradients_through_conversions_and_analysis():
     def gain(p):
         return static_gain(eqx.combine(p, static).to_state_space())[None]
 
-    for fn in (via_rational, via_modal_complex, pole_values, gain):
-        _relative_check(fn, arrays)
+    def all_outputs(p):  # one function, so the derivatives compile once
+        parts = (via_rational(p), via_modal_complex(p), pole_values(p), gain(p))
+        return jnp.concatenate([jnp.ravel(x).astype(complex) for x in parts])
+
+    _relative_check(all_outputs, arrays)
 
 
 # ---------------------------------------------------------------------------------------
@@ -465,8 +529,17 @@ def test_gradients_through_conversions_and_analysis():
 def test_bad_inputs():
     rng = np.random.default_rng(14)
     m = random_modal(rng, 2)
-    for fn in (to_rational, to_modal, poles, zeros, static_gain, is_stable, damping,
-               acceleration_to_position, position_to_acceleration):
+    for fn in (
+        to_rational,
+        to_modal,
+        poles,
+        zeros,
+        static_gain,
+        is_stable,
+        damping,
+        acceleration_to_position,
+        position_to_acceleration,
+    ):
         with pytest.raises(TypeError, match="expected a jaxvs linear model"):
             fn(np.ones(3))
     with pytest.raises(ValueError, match="residues must be one of"):
@@ -484,20 +557,26 @@ def test_bad_inputs():
     with pytest.raises(Exception, match="unstable"):
         to_modal(jaxvs.RationalTF(jnp.array([1.0]), jnp.array([1.0, -1.0, 100.0])))
     with pytest.raises(Exception, match="velocity term"):
-        to_modal(jaxvs.RationalTF(jnp.array([1.0, 0.0]), jnp.array([1.0, 1.0, 100.0])), residues="real")
+        to_modal(
+            jaxvs.RationalTF(jnp.array([1.0, 0.0]), jnp.array([1.0, 1.0, 100.0])), residues="real"
+        )
     # the same checks under jit
     with pytest.raises(Exception, match="real poles"):
         eqx.filter_jit(to_modal)(real_poles)
     # position_to_acceleration: improper results
     with pytest.raises(ValueError, match="improper"):
-        position_to_acceleration(jaxvs.RationalTF(jnp.array([1.0, 0.0]), jnp.array([1.0, 1.0, 100.0])))
+        position_to_acceleration(
+            jaxvs.RationalTF(jnp.array([1.0, 0.0]), jnp.array([1.0, 1.0, 100.0]))
+        )
     ss = m.to_state_space()
     with pytest.raises(Exception, match="improper"):
         position_to_acceleration(jaxvs.StateSpace(ss.A, ss.B, ss.C, jnp.ones((1, 1))))
     with pytest.raises(Exception, match="improper"):
         position_to_acceleration(jaxvs.ModalModel(m.omega_n, m.zeta, m.residues, feedthrough=1.0))
     with pytest.raises(Exception, match="improper"):
-        eqx.filter_jit(position_to_acceleration)(jaxvs.StateSpace(ss.A, ss.B, ss.C, jnp.ones((1, 1))))
+        eqx.filter_jit(position_to_acceleration)(
+            jaxvs.StateSpace(ss.A, ss.B, ss.C, jnp.ones((1, 1)))
+        )
     over = jaxvs.ModalModel(jnp.array([10.0]), jnp.array([1.5]), jnp.array([1.0]))
     with pytest.raises(Exception, match="over-damped"):
         position_to_acceleration(over)

@@ -162,11 +162,10 @@ class CalibrationResult(eqx.Module):
 
 
 def _result_name(result: RESULTS) -> str:
-    value = int(np.asarray(result._value))
-    for name, item in RESULTS._name_to_item.items():
-        if int(np.asarray(item._value)) == value:
+    for name in dict.fromkeys(name for name, _ in _REASONS):
+        if bool(result == getattr(RESULTS, name)):
             return name
-    return str(value)
+    return "unknown"
 
 
 # ----------------------------------------------------------------------------- free leaves
@@ -186,9 +185,10 @@ def free_spec(model: PyTree, free: Any = None) -> PyTree[bool]:
 
     - `model`: the (possibly reparametrised) model.
     - `free`: `None` (every floating-point array leaf, except the fixed fields of
-      parametrisations and [`Fixed`][] leaves); a pytree of bools or of filter functions
-      as for `eqx.partition`; or a where-function `model -> node or sequence of nodes`
-      as for `eqx.tree_at` (e.g. `lambda m: (m.omega_n, m.zeta)`).
+      parametrisations and [`Fixed`][] leaves); a filter spec as for `eqx.partition` (a
+      pytree of bools, or a predicate such as `eqx.is_inexact_array`, possibly as the
+      leaves of a prefix pytree); or a where-function `model -> node or sequence of
+      nodes` as for `eqx.tree_at` (e.g. `lambda m: (m.omega_n, m.zeta)`).
 
     **Returns:**
 
@@ -197,7 +197,15 @@ def free_spec(model: PyTree, free: Any = None) -> PyTree[bool]:
     default = _default_free(model)
     if free is None:
         return default
-    if callable(free) and not isinstance(free, eqx.Module | list | tuple | dict):
+    is_where = callable(free) and not isinstance(free, eqx.Module | list | tuple | dict)
+    if is_where:
+        # a filter predicate (e.g. eqx.is_inexact_array) returns a bool for the whole
+        # model, a where-function returns nodes of it
+        try:
+            is_where = not isinstance(free(model), bool | np.bool_)
+        except Exception:  # a where-function that fails on the model: report below
+            is_where = True
+    if is_where:
 
         def where(tree):
             nodes = free(tree)
@@ -551,9 +559,10 @@ def calibrate(
     - `solver`: `None` (`optimistix.LevenbergMarquardt`), an optimistix least-squares
       solver, an optimistix minimiser such as `optimistix.BFGS` (on `½ Σ r²`), an optax
       optimiser such as `optax.adam(1e-2)`, or a name (`"levenberg_marquardt"`, `"bfgs"`,
-      ...). Gradient-free of diffrax details: a diffrax model under Levenberg-Marquardt
-      needs `adjoint=diffrax.ForwardMode()` in its `diffeqsolve` (LM builds Jacobians in
-      forward mode).
+      ...). Least-squares solvers and the covariance build Jacobians in forward mode, so
+      a diffrax model needs `adjoint=diffrax.ForwardMode()` in its `diffeqsolve`;
+      gradient methods (BFGS, optax) differentiate in reverse mode, for which
+      `diffrax.DirectAdjoint()` serves both (or pass `covariance=False`).
     - `free`: which leaves are calibrated: `None` (all floating-point arrays), a filter
       spec (pytree of bools), or a where-function `model -> nodes` (as `eqx.tree_at`).
       Everything else is fixed.

@@ -14,7 +14,7 @@ def jacobian_covariance(
     r"""Asymptotic covariance `σ̂² (JᵀJ)⁻¹` of a least-squares estimate, with a rank test.
 
     `σ̂² = SSR / (N - p)` is the unbiased residual variance (Seber & Wild, *Nonlinear
-    Regression*, 1989, §2.1, eq. 2.9 and Theorem 2.1). `(JᵀJ)⁻¹` is formed from the SVD of
+    Regression*, 1989, §2.1). `(JᵀJ)⁻¹` is formed from the SVD of
     the column-equilibrated Jacobian `J D⁻¹` (`D` = column norms), so that parameters in
     different units do not fake a rank deficiency: `(JᵀJ)⁻¹ = D⁻¹ V S⁻² Vᵀ D⁻¹`.
     Singular values below `max(N, p) · ε · s_max` (numpy's `matrix_rank` rule) span the
@@ -54,8 +54,9 @@ def delta_method(
     unidentified: Bool[Array, " raw"],
 ) -> Float[Array, "phys phys"]:
     r"""Covariance of `φ(θ)` from that of `θ`: `G Σ Gᵀ`, `G = ∂φ/∂θ` (first-order delta
-    method; Seber & Wild 1989, §1.5.4). Physical parameters that depend on a
-    non-identified raw parameter get an infinite variance and NaN covariances."""
+    method; Casella & Berger, *Statistical Inference*, 2nd ed., 2002, §5.5.4). Physical
+    parameters that depend on a non-identified raw parameter get an infinite variance and
+    NaN covariances."""
     finite = jnp.where(unidentified[:, None] | unidentified[None, :], 0.0, cov_raw)
     cov = grad @ finite @ grad.T
     bad = jnp.any((grad != 0) & unidentified[None, :], axis=1)

@@ -135,9 +135,9 @@ def multistart(
 
     **Arguments:**
 
-    - `models`: the initial guesses: a `list` of models of one structure, or one model
-      whose *free* leaves carry a leading start axis (fixed leaves are shared), e.g.
-      `jax.vmap(make_guess)(keys)`.
+    - `models`: the initial guesses: one model whose *free* leaves carry a leading start
+      axis (its fixed leaves are shared by every start), e.g. `jax.vmap(make_guess)(keys)`,
+      or a `list` of models of one structure (fixed leaves are taken from the first).
     - `data`, `residual`, `solver`, `free`, `weights`, `max_steps`, `rtol`, `atol`,
       `covariance`, `confidence`: as for [`calibrate`][].
     - `throw`: raise [`CalibrationError`][] if no start succeeds.
@@ -167,7 +167,6 @@ def multistart(
             "multistart: every free leaf needs the same leading start axis; got leading "
             f"sizes {sorted(map(str, sizes))}. Build the guesses with jax.vmap, or pass a list."
         )
-    # the spec of one start: same structure, so the batched spec applies member-wise
     prepared = residual.prepare(data)
     out, times = _run_batched(
         _multistart_impl,

@@ -1,23 +1,26 @@
-r"""A small Levenberg-Marquardt kernel for ONE problem, written to be `vmap`-ped over families.
+r"""A small Levenberg-Marquardt kernel for ONE problem, and a driver that runs a family of them.
 
 The problem enters only through its *normal equations*: `evaluate(θ, args)` returns the
 cost `½‖r‖²`, the Gauss-Newton matrix `JᵀJ` and the gradient `Jᵀr`. Problems with
 structure (e.g. rational frequency responses, see `_sk.normal_equations`) form these in
 `O(data · parameters)` without the Jacobian; a generic problem can form them from
-`jax.jacfwd`. A `feasible(θ, args)` predicate rejects steps that leave the admissible set
-(e.g. unstable denominators), exactly as steps that increase the cost are rejected, so
-every accepted iterate stays feasible.
+`jax.jacfwd`. A `feasible(θ)` predicate describes an open admissible set (e.g. stable
+denominators): a step that would leave it is shortened to the largest feasible fraction
+on a geometric grid (the "fraction to the boundary" rule of interior-point methods,
+Nocedal & Wright 2006, *Numerical Optimization*, eq. 19.9), so every iterate is feasible
+and an optimum on the boundary is approached geometrically instead of by rejected steps.
 
 Algorithm: Marquardt's scaled damping `(JᵀJ + μ diag(JᵀJ)) δ = -Jᵀr` (Marquardt 1963,
-SIAM J. Appl. Math. 11(2)), with Nielsen's update of `μ` from the gain ratio (Nielsen
-1999, IMM-REP-1999-05, eq. 2.20; Madsen, Nielsen & Tingleff 2004, *Methods for non-linear
-least squares problems*, Alg. 3.16), and MINPACK-style stopping rules (Moré 1978,
-"The Levenberg-Marquardt algorithm: implementation and theory"): relative reductions of
-the cost below `rtol`, or a scaled step below `rtol` relative to the scaled parameters.
+SIAM J. Appl. Math. 11(2)), Nielsen's update of `μ` from the gain ratio (Nielsen 1999,
+IMM-REP-1999-05; Madsen, Nielsen & Tingleff 2004, *Methods for non-linear least squares
+problems*, Alg. 3.16), and MINPACK-style stopping rules (Moré 1978, "The Levenberg-Marquardt
+algorithm: implementation and theory"): relative reductions of the cost below `rtol`, or a
+scaled step below `rtol` relative to the scaled parameters.
 
-Under `vmap` the `while_loop` runs until the slowest member stops; members that have
-stopped are frozen by the batching rule of `while_loop`, so each member's result equals an
-unbatched run.
+[`batched_while`][] runs any per-member iteration over a family with *work compaction*:
+blocks of still-running members are iterated a few steps at a time, so a few slow members
+do not make the whole family pay for their steps (a `vmap`-ped `while_loop` runs every
+member until the slowest stops), and each block's work stays in the CPU caches.
 """
 
 from collections.abc import Callable
@@ -26,9 +29,70 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, Int
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from ._results import RESULTS
+
+# Candidate fractions of a step, 2^(-k/4): a step is shortened to the largest feasible one.
+# Heuristic: the ratio 2^(1/4) keeps >= 84 % of the feasible part of a step; below 2^-12
+# the step is rejected instead.
+_FRACTIONS = 2.0 ** (-np.arange(49) / 4.0)
+
+
+def batched_while(
+    cond: Callable[[Any, Any], Array],
+    body: Callable[[Any, Any], Any],
+    state: PyTree,
+    args: PyTree,
+    *,
+    block: int,
+    block_steps: int,
+) -> PyTree:
+    """`while cond(s, a): s = body(s, a)` for every member of a family, with compaction.
+
+    **Arguments:**
+
+    - `cond`, `body`: per-member functions of `(state, args)`; `body` must eventually
+      make `cond` false (e.g. through a step counter in the state).
+    - `state`, `args`: pytrees whose leaves carry the family axis first; `args` is
+      read-only.
+    - `block`, `block_steps`: the first `block` still-running members are gathered,
+      iterated (`vmap`) at most `block_steps` times, and scattered back, until no member
+      runs. A family of at most `block` members is one `vmap`-ped `while_loop`.
+
+    **Returns:**
+
+    The final states; each equals what an unbatched `while_loop` gives for that member.
+    """
+    size = jax.tree_util.tree_leaves(state)[0].shape[0]
+
+    def run(st, ar, limit):
+        def one(s, a):
+            def c(carry):
+                return cond(carry[0], a) & (carry[1] < limit)
+
+            def b(carry):
+                return body(carry[0], a), carry[1] + 1
+
+            return jax.lax.while_loop(c, b, (s, jnp.asarray(0)))[0]
+
+        return jax.vmap(one)(st, ar)
+
+    if size <= block:
+        return run(state, args, jnp.iinfo(jnp.int32).max)
+
+    def outer_cond(st):
+        return jnp.any(jax.vmap(cond)(st, args))
+
+    def outer_body(st):
+        active = jax.vmap(cond)(st, args)
+        idx = jnp.argsort(~active, stable=True)[:block]  # running members first
+        take = lambda x: x[idx]
+        sub = run(jax.tree_util.tree_map(take, st), jax.tree_util.tree_map(take, args), block_steps)
+        return jax.tree_util.tree_map(lambda x, y: x.at[idx].set(y), st, sub)
+
+    return jax.lax.while_loop(outer_cond, outer_body, state)
 
 
 class LMState(eqx.Module):
@@ -54,36 +118,15 @@ def _damped_step(jtj, jtr, mu):
     return y * sc, sc
 
 
-def levenberg_marquardt(
-    evaluate: Callable[[Array, Any], tuple[Array, Array, Array]],
-    feasible: Callable[[Array, Any], Array],
-    theta0: Float[Array, " p"],
-    args: Any,
-    *,
-    max_steps: int,
-    rtol: float,
-    mu0: float = 1e-3,
-) -> tuple[LMState, RESULTS]:
-    """Minimise `½‖r(θ)‖²` from a feasible `theta0`.
+def _finite(*xs) -> Array:
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in xs]))
 
-    **Arguments:**
 
-    - `evaluate`: `(θ, args) -> (cost, JᵀJ, Jᵀr)`.
-    - `feasible`: `(θ, args) -> bool`; `theta0` must be feasible (callers check).
-    - `theta0`: `(p,)` starting point.
-    - `max_steps`: largest number of trial steps (accepted or rejected).
-    - `rtol`: relative tolerance on the cost reduction and on the scaled step.
-    - `mu0`: initial damping, relative to the unit-diagonal-scaled `JᵀJ`.
-
-    **Returns:**
-
-    The final state (the best feasible point found, its normal equations and counters)
-    and a result code: `successful`, `max_steps_reached` or `nonfinite`.
-    """
-    dtype = theta0.dtype
+def lm_init(evaluate, theta0: Array, args: Any, mu0: float = 1e-3) -> LMState:
+    """State at a starting point (one evaluation of the normal equations)."""
     cost0, jtj0, jtr0 = evaluate(theta0, args)
-    bad0 = ~(jnp.isfinite(cost0) & jnp.all(jnp.isfinite(jtj0)) & jnp.all(jnp.isfinite(jtr0)))
-    state = LMState(
+    dtype = theta0.dtype
+    return LMState(
         theta=theta0,
         cost=cost0,
         jtj=jtj0,
@@ -93,56 +136,58 @@ def levenberg_marquardt(
         num_steps=jnp.asarray(0),
         # A zero residual is already optimal (noiseless data and an exact initial guess).
         converged=cost0 == 0,
-        nonfinite=bad0,
+        nonfinite=~_finite(cost0, jtj0, jtr0),
     )
 
-    def cond(s: LMState):
-        return (~s.converged) & (~s.nonfinite) & (s.num_steps < max_steps)
 
-    def body(s: LMState):
-        delta, sc = _damped_step(s.jtj, s.jtr, s.mu)
-        trial = s.theta + delta
-        cost_t, jtj_t, jtr_t = evaluate(trial, args)
-        # Predicted reduction of the Gauss-Newton model: -(gᵀδ + ½ δᵀ JᵀJ δ) > 0.
-        pred = -(jnp.dot(s.jtr, delta) + 0.5 * jnp.dot(delta, s.jtj @ delta))
-        actual = s.cost - cost_t
-        finite = (
-            jnp.isfinite(cost_t)
-            & jnp.all(jnp.isfinite(jtj_t))
-            & jnp.all(jnp.isfinite(jtr_t))
-            & jnp.all(jnp.isfinite(delta))
-        )
-        accept = finite & (actual > 0) & feasible(trial, args)
-        gain = actual / jnp.where(pred > 0, pred, 1.0)
-        mu = jnp.where(
-            accept,
-            s.mu * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3),
-            s.mu * s.nu,
-        )
-        nu = jnp.where(accept, 2.0, 2.0 * s.nu)
-        # Stopping rules (MINPACK lmder's ftol and xtol tests, with ftol = xtol = rtol).
-        small_reduction = accept & (actual <= rtol * s.cost) & (pred <= rtol * s.cost)
-        step_norm = jnp.linalg.norm(delta / sc)
-        theta_norm = jnp.linalg.norm(s.theta / sc)
-        small_step = jnp.all(jnp.isfinite(delta)) & (step_norm <= rtol * (theta_norm + rtol))
-        pick = lambda new, old: jnp.where(accept, new, old)
-        return LMState(
-            theta=pick(trial, s.theta),
-            cost=pick(cost_t, s.cost),
-            jtj=pick(jtj_t, s.jtj),
-            jtr=pick(jtr_t, s.jtr),
-            mu=mu,
-            nu=nu,
-            num_steps=s.num_steps + 1,
-            converged=small_reduction | small_step | (accept & (cost_t == 0)),
-            # A damping that overflows means no step can be taken any more.
-            nonfinite=~jnp.isfinite(mu),
-        )
+def lm_running(state: LMState, max_steps: int) -> Bool[Array, ""]:
+    return (~state.converged) & (~state.nonfinite) & (state.num_steps < max_steps)
 
-    state = jax.lax.while_loop(cond, body, state)
-    result = RESULTS.where(
+
+def lm_step(evaluate, feasible, state: LMState, args: Any, rtol: float) -> LMState:
+    """One trial step: solve, shorten to the feasible set, evaluate, accept or reject."""
+    s = state
+    delta, sc = _damped_step(s.jtj, s.jtr, s.mu)
+    ok = jax.vmap(lambda t: feasible(s.theta + t * delta))(jnp.asarray(_FRACTIONS, delta.dtype))
+    frac = jnp.max(jnp.where(ok, _FRACTIONS, 0.0))
+    delta = frac * delta
+    trial = s.theta + delta
+    cost_t, jtj_t, jtr_t = evaluate(trial, args)
+    # Predicted reduction of the Gauss-Newton model: -(gᵀδ + ½ δᵀ JᵀJ δ) > 0.
+    pred = -(jnp.dot(s.jtr, delta) + 0.5 * jnp.dot(delta, s.jtj @ delta))
+    actual = s.cost - cost_t
+    finite = _finite(cost_t, jtj_t, jtr_t, delta)
+    accept = finite & (actual > 0) & (frac > 0)
+    gain = actual / jnp.where(pred > 0, pred, 1.0)
+    mu = jnp.where(
+        accept,
+        s.mu * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3),
+        s.mu * s.nu,
+    )
+    nu = jnp.where(accept, 2.0, 2.0 * s.nu)
+    # Stopping rules (MINPACK lmder's ftol and xtol tests, with ftol = xtol = rtol).
+    small_reduction = accept & (actual <= rtol * s.cost) & (pred <= rtol * s.cost)
+    step_norm = jnp.linalg.norm(delta / sc)
+    theta_norm = jnp.linalg.norm(s.theta / sc)
+    small_step = _finite(delta) & (step_norm <= rtol * (theta_norm + rtol))
+    pick = lambda new, old: jnp.where(accept, new, old)
+    return LMState(
+        theta=pick(trial, s.theta),
+        cost=pick(cost_t, s.cost),
+        jtj=pick(jtj_t, s.jtj),
+        jtr=pick(jtr_t, s.jtr),
+        mu=mu,
+        nu=nu,
+        num_steps=s.num_steps + 1,
+        converged=small_reduction | small_step | (accept & (cost_t == 0)),
+        # A damping that overflows means no step can be taken any more.
+        nonfinite=~jnp.isfinite(mu),
+    )
+
+
+def lm_result(state: LMState) -> RESULTS:
+    return RESULTS.where(
         state.nonfinite,
         RESULTS.nonfinite,
         RESULTS.where(state.converged, RESULTS.successful, RESULTS.max_steps_reached),
     )
-    return state, result

@@ -9,6 +9,8 @@ A residual is a small `eqx.Module` with two methods:
 - `__call__(model, data)` (pure, runs inside the solver): the real residual vector, one
   entry per measured value, already weighted. Complex errors are returned as real and
   imaginary parts.
+- `is_unstable(model)` (optional): whether the initial guess cannot be used, e.g. an
+  unstable linear model for a time-domain residual (default: never).
 
 User callbacks follow optimistix: a function of `(model, data)`, data passed as an
 argument rather than captured in a closure.
@@ -36,6 +38,9 @@ __all__ = [
     "PredictionError",
     "SimulationError",
 ]
+
+
+_METHODS = ("zoh", "tustin", "euler", "heun")
 
 
 class ExcitationWarning(UserWarning):
@@ -76,28 +81,33 @@ def _check_finite(x: Array, name: str, where: str) -> Array:
     )
 
 
-def _lookup(data: Any, name: str, where: str) -> Any:
-    """`data[name]` for mappings and Records, `data.name` for other objects."""
+def _contains(data: Any, name: str) -> bool:
+    """`name in data` for containers with named signals (Records, mappings)."""
     try:
-        if isinstance(data, Mapping) or hasattr(data, "__getitem__") and hasattr(data, "names"):
-            return data[name]
-        return getattr(data, name)
-    except (KeyError, AttributeError):
-        have = list(data.keys()) if isinstance(data, Mapping) else getattr(data, "names", None)
-        raise ValueError(
-            f"{where}: the data have no signal {name!r}"
-            + (f" (they have {list(have)})" if have is not None else "")
-            + ". Rename the signal, or tell the residual its name (e.g. "
-            f"{where}(inputs='force', outputs='q'))."
-        ) from None
+        return name in data
+    except TypeError:  # not a container
+        return False
 
 
 def _has(data: Any, name: str) -> bool:
     if isinstance(data, Mapping):
         return name in data
-    if hasattr(data, "names") and hasattr(data, "__contains__"):
-        return name in data
-    return hasattr(data, name)
+    return _contains(data, name) or hasattr(data, name)
+
+
+def _lookup(data: Any, name: str, where: str) -> Any:
+    """`data[name]` for mappings and Records (signals), else the attribute `data.name`."""
+    if isinstance(data, Mapping) and name in data or _contains(data, name):
+        return data[name]
+    if not isinstance(data, Mapping) and hasattr(data, name):
+        return getattr(data, name)
+    have = list(data.keys()) if isinstance(data, Mapping) else getattr(data, "names", None)
+    raise ValueError(
+        f"{where}: the data have no signal {name!r}"
+        + (f" (they have {list(have)})" if have is not None else "")
+        + ". Rename the signal, or tell the residual its name (e.g. "
+        f"{where}(inputs='force', outputs='q'))."
+    )
 
 
 def _as_float_array(x: Any, name: str, where: str) -> Array:
@@ -150,18 +160,22 @@ def _sample_time(data: Any, where: str) -> Any:
     return dt
 
 
-def _warn_if_constant(u: Array, name: str, where: str) -> None:
+def _warn_if_constant(u: Array, names: str | tuple[str, ...], where: str) -> None:
     uc = _concrete(u)
     if uc is None or uc.size == 0:
         return
-    span = np.ptp(uc, axis=0)
-    scale = np.maximum(np.max(np.abs(uc), axis=0), np.finfo(float).tiny)
+    span = np.atleast_1d(np.ptp(uc, axis=0))
+    scale = np.atleast_1d(np.maximum(np.max(np.abs(uc), axis=0), np.finfo(float).tiny))
     # heuristic: an input whose range is below 1e-12 of its size carries no information.
-    if np.any(span <= 1e-12 * scale):
+    flat = (span <= 1e-12 * scale).tolist()
+    cols = [names] if isinstance(names, str) else list(names)
+    constant = [c for c, f in zip(cols, flat) if f]
+    if constant:
         warnings.warn(
-            f"{where}: input {name!r} is constant, so it excites only the static gain; the "
-            "dynamic parameters (time constants, frequencies, damping) will not be "
-            "identifiable. Use an exciting input: a PRBS, swept sine or white noise "
+            f"{where}: input {', '.join(map(repr, constant))} is constant. Apart from the "
+            "start-up transient (a step, if the record starts at rest) it excites only the "
+            "static gain, so time constants, frequencies and damping are poorly or not at "
+            "all identifiable. Use an exciting input: a PRBS, swept sine or white noise "
             "(jaxvs.data.prbs / swept_sine / white_noise), or steps between levels.",
             ExcitationWarning,
             stacklevel=4,
@@ -214,13 +228,13 @@ class AbstractResidual(eqx.Module):
 # ----------------------------------------------------------------------------- time domain
 
 
-class _TimeResidual(AbstractResidual):
+class _AbstractTimeResidual(AbstractResidual):
     """Shared preparation of input/output time series."""
 
-    fn: Callable | None
-    inputs: str | tuple[str, ...] = eqx.field(static=True)
-    outputs: str | tuple[str, ...] = eqx.field(static=True)
-    skip: int = eqx.field(static=True)
+    fn: eqx.AbstractVar[Callable | None]
+    inputs: eqx.AbstractVar[str | tuple[str, ...]]
+    outputs: eqx.AbstractVar[str | tuple[str, ...]]
+    skip: eqx.AbstractVar[int]
 
     def prepare(self, data: Any) -> dict[str, Any]:
         where = type(self).__name__
@@ -243,7 +257,7 @@ class _TimeResidual(AbstractResidual):
             )
         u = _check_finite(u, str(self.inputs), where)
         y = _check_finite(y, str(self.outputs), where)
-        _warn_if_constant(u, str(self.inputs), where)
+        _warn_if_constant(u, self.inputs, where)
         prepared = {"u": u, "y": y, "dt": dt}
         if _has(data, "x0"):
             prepared["x0"] = jnp.asarray(_lookup(data, "x0", where))
@@ -264,13 +278,14 @@ class _TimeResidual(AbstractResidual):
         return (y_hat - y)[start:].ravel()
 
 
-class SimulationError(_TimeResidual):
+class SimulationError(_AbstractTimeResidual):
     r"""Output (simulation) error: simulate the model on the measured input from rest and
     compare with the measured output, `r_k = ŷ_k - y_k` for `k >= skip`.
 
     This is the output-error criterion of system identification (Ljung, *System
-    Identification*, 2nd ed., 1999, §4.2, eq. 4.25): unbiased under white output noise,
-    but the residual is a nonlinear function of every dynamic parameter.
+    Identification*, 2nd ed., 1999, §4.2, the output-error structure): unbiased under
+    white output noise, but the residual is a nonlinear function of every dynamic
+    parameter.
 
     **Arguments:**
 
@@ -288,6 +303,10 @@ class SimulationError(_TimeResidual):
     [s] (or a uniform time vector `t`); optionally `x0` for `model.simulate`-style models.
     """
 
+    fn: Callable | None
+    inputs: str | tuple[str, ...] = eqx.field(static=True)
+    outputs: str | tuple[str, ...] = eqx.field(static=True)
+    skip: int = eqx.field(static=True)
     method: str = eqx.field(static=True)
 
     def __init__(
@@ -299,6 +318,10 @@ class SimulationError(_TimeResidual):
         method: Literal["zoh", "tustin", "euler", "heun"] = "zoh",
         skip: int = 0,
     ):
+        if method not in _METHODS:
+            raise ValueError(
+                f"SimulationError: unknown method {method!r}; choose one of {_METHODS}."
+            )
         self.fn, self.inputs, self.outputs, self.skip = fn, inputs, outputs, int(skip)
         self.method = method
 
@@ -328,7 +351,7 @@ class SimulationError(_TimeResidual):
 def _faddeev_leverrier(a: Float[Array, "n n"]) -> Float[Array, " n1"]:
     """Characteristic polynomial `det(zI - A)` (highest power first, monic).
 
-    Faddeev-LeVerrier recursion (Gantmacher, *The Theory of Matrices*, Vol. 1, §IV.4):
+    Faddeev-LeVerrier recursion (Gantmacher, *The Theory of Matrices*, Vol. 1, ch. IV):
     `M_k = A M_{k-1} + c_{k-1} I`, `c_k = -tr(A M_k) / k`. Matrix products only, so it is
     differentiable everywhere (unlike eigenvalues at repeated roots). Used on discrete
     matrices with spectral radius <= 1, where it keeps its digits at the orders here.
@@ -374,10 +397,11 @@ def _expm(m: Float[Array, "n n"]) -> Float[Array, "n n"]:
 def _arx_form(model: AbstractLinearModel, dt: Any) -> tuple[Array, Array]:
     """`(a, b)` of the ZOH-discretised SISO model `B(q⁻¹)/A(q⁻¹)`, `a_0 = 1`.
 
-    ZOH: `exp([[A, B], [0, 0]] dt) = [[A_d, B_d], [0, I]]` (Franklin, Powell, Workman,
-    *Digital Control of Dynamic Systems*, 3rd ed., §6.3). `A(z)` is the characteristic
-    polynomial of `A_d`; `B` follows from the Markov parameters `h_0 = D`,
-    `h_k = C A_d^{k-1} B_d` through `B(q⁻¹) = A(q⁻¹) H(q⁻¹)` truncated at degree `n`.
+    ZOH: `exp([[A, B], [0, 0]] dt) = [[A_d, B_d], [0, I]]` (Van Loan, "Computing
+    integrals involving the matrix exponential", IEEE Trans. Autom. Control 23, 1978).
+    `A(z)` is the characteristic polynomial of `A_d`; `B` follows from the Markov
+    parameters `h_0 = D`, `h_k = C A_d^{k-1} B_d` through `B(q⁻¹) = A(q⁻¹) H(q⁻¹)`
+    truncated at degree `n`.
     """
     ss = model.to_state_space()
     A, B, C, D = ss.A, ss.B, ss.C, ss.D
@@ -396,14 +420,14 @@ def _arx_form(model: AbstractLinearModel, dt: Any) -> tuple[Array, Array]:
     return a, b
 
 
-class PredictionError(_TimeResidual):
-    r"""One-step-ahead prediction error, `r_k = y_k - ŷ(k | k-1)`.
+class PredictionError(_AbstractTimeResidual):
+    r"""One-step-ahead prediction error, `r_k = ŷ(k | k-1) - y_k`.
 
     **What "one step" means for a continuous-time model.** A linear model is first
     discretised exactly for piecewise-constant inputs (zero-order hold at the data's `dt`),
     `y_k = B(q⁻¹)/A(q⁻¹) u_k`, `A(q⁻¹) = 1 + a_1 q⁻¹ + ... + a_n q⁻ⁿ`. The one-step-ahead
     predictor is then that of the ARX (equation-error) noise structure, which uses the
-    *measured* past outputs (Ljung 1999, §3.2, eq. 3.45 with `C = 1`, `D = A`):
+    *measured* past outputs (Ljung 1999, §4.2, the ARX predictor `ŷ = B u + (1 - A) y`):
 
         ŷ(k | k-1) = -a_1 y_{k-1} - ... - a_n y_{k-n} + b_0 u_k + ... + b_n u_{k-n}.
 
@@ -419,6 +443,11 @@ class PredictionError(_TimeResidual):
       models, otherwise `model.predict(u, y, dt)`.
     - `inputs`, `outputs`, `skip`: as for [`SimulationError`][].
     """
+
+    fn: Callable | None
+    inputs: str | tuple[str, ...] = eqx.field(static=True)
+    outputs: str | tuple[str, ...] = eqx.field(static=True)
+    skip: int = eqx.field(static=True)
 
     def __init__(
         self,
@@ -481,7 +510,7 @@ class FrequencyError(AbstractResidual):
         - `"relative"`: `w = 1/|H|` (relative error, every decade counts);
         - `"coherence"`: `w = sqrt(γ² / (1 - γ²)) / |H|`, i.e. one over the standard
           deviation of an H1 estimate up to a constant (Bendat & Piersol, *Random Data*,
-          4th ed., 2010, eq. 9.90: `σ(|H|)/|H| ≈ sqrt((1 - γ²) / (2 n γ²))`); needs the
+          4th ed., 2010, ch. 9: `σ(|H|)/|H| ≈ sqrt((1 - γ²) / (2 n γ²))`); needs the
           data's coherence. γ² is clipped to `1 - 1e-6` (heuristic: a perfect coherence
           would give an infinite weight).
 

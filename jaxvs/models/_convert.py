@@ -1,4 +1,4 @@
-"""Conversions between linear model forms, and position ↔ acceleration (TMF study, eq. 6).
+"""Conversions between linear model forms, and position ↔ acceleration.
 
 Every conversion goes through the real block-diagonal (modal) realisation
 (`ModalRealisation`): each 2x2 block `a_i` contributes the second-order section
@@ -264,9 +264,7 @@ def modal_from_sections(
         alpha = -zeta * omega
         beta = omega * _safe_sqrt((1 - zeta) * (1 + zeta))
         beta_safe = jnp.where(beta > 0, beta, 1.0)[:, None, None]
-        res = jax.lax.complex(
-            sec_a / 2, -(sec_b + sec_a * alpha[:, None, None]) / (2 * beta_safe)
-        )
+        res = jax.lax.complex(sec_a / 2, -(sec_b + sec_a * alpha[:, None, None]) / (2 * beta_safe))
     else:
         scale = jnp.abs(sec_b) + jnp.abs(sec_a) * omega[:, None, None]
         omega = eqx.error_if(
@@ -286,8 +284,7 @@ def modal_from_sections(
 def _to_modal(model: AbstractLinearModel, kind: str) -> ModalModel:
     r = model.modal_realisation()
     who = "to_modal"
-    _, det, disc = block_invariants(r.a)
-    m = (r.a[:, 0, 0] + r.a[:, 1, 1]) / 2
+    m, det, disc = block_invariants(r.a)
     det = eqx.error_if(
         det,
         jnp.any(det <= 0) if kind == "real" else jnp.any(disc >= 0),
@@ -319,9 +316,7 @@ def _(model: ModalModel, kind: str) -> ModalModel:
         return model
     a, b = model._sections()
     d = model.feedthrough.reshape(model.n_outputs, model.n_inputs)
-    return modal_from_sections(
-        model.omega_n, model.zeta, a, b, d, model.io_shape, kind, "to_modal"
-    )
+    return modal_from_sections(model.omega_n, model.zeta, a, b, d, model.io_shape, kind, "to_modal")
 
 
 _TO_MODAL = {kind: functools.partial(_to_modal, kind=kind) for kind in _RESIDUE_KINDS}
@@ -355,8 +350,8 @@ def to_modal(model: AbstractLinearModel, *, residues: str = "complex") -> ModalM
 
     **Returns:**
 
-    A `ModalModel` with `order // 2` modes (per input block for MIMO state spaces), residues
-    of shape `(mode,)` (SISO), `(mode, out)` (one input) or `(mode, out, in)`.
+    A `ModalModel` with `order // 2` modes and residues of shape `(mode,)` (SISO),
+    `(mode, out)` (one input) or `(mode, out, in)`; a `ModalModel` keeps its own modes.
     """
     check_model(model, "to_modal")
     if residues not in _RESIDUE_KINDS:
@@ -371,7 +366,7 @@ def to_modal(model: AbstractLinearModel, *, residues: str = "complex") -> ModalM
 
 
 # ---------------------------------------------------------------------------------------
-# Position <-> acceleration (study eq. 6: x(s) = a(s) / s²)
+# Position <-> acceleration (Doerrer et al. 2022, eq. 6: x(s) = a(s) / s²)
 # ---------------------------------------------------------------------------------------
 
 
@@ -433,15 +428,14 @@ def _modal_result(model: ModalModel, sec_a, sec_b, d, who: str) -> ModalModel:
         f"{who}: over-damped modes (zeta >= 1) would need a velocity term with real "
         "residues, which a ModalModel cannot hold. Convert first with model.to_state_space().",
     )
-    return modal_from_sections(
-        model.omega_n, zeta, sec_a, sec_b, d, model.io_shape, "complex", who
-    )
+    return modal_from_sections(model.omega_n, zeta, sec_a, sec_b, d, model.io_shape, "complex", who)
 
 
 def acceleration_to_position(model: AbstractLinearModel) -> AbstractLinearModel:
     """Divide a model by `s²`: an accelerance (or any `a(s)`) becomes a receptance `x(s)`.
 
-    Study eq. 6 (position = acceleration / s², integration in the frequency domain). Exact
+    Doerrer et al. 2022, eq. 6 (position = acceleration / s², integration in the frequency
+    domain). Exact
     for every family:
 
     - `RationalTF`: `num / (den s²)` (two poles at 0 appended to the denominator).
@@ -486,9 +480,11 @@ def _(model: StateSpace) -> StateSpace:
     tol = _tolerance(A.dtype)
     nc, nb, na = jnp.linalg.norm(C), jnp.linalg.norm(B), jnp.linalg.norm(A)
     CB = C @ B
-    bad = (jnp.max(jnp.abs(CB)) > tol * nc * nb) | (
-        jnp.max(jnp.abs(D)) * na > tol * nc * nb
-    ) | ((nc * nb == 0) & jnp.any(D != 0))
+    bad = (
+        (jnp.max(jnp.abs(CB)) > tol * nc * nb)
+        | (jnp.max(jnp.abs(D)) * na > tol * nc * nb)
+        | ((nc * nb == 0) & jnp.any(D != 0))
+    )
     A = eqx.error_if(
         A,
         bad,
@@ -531,8 +527,8 @@ def _(model: ModalModel) -> ModalModel:
 def position_to_acceleration(model: AbstractLinearModel) -> AbstractLinearModel:
     """Multiply a model by `s²`: a receptance `x(s)` becomes an accelerance `a(s)`.
 
-    The inverse of [`acceleration_to_position`][] (study eq. 6). The result is proper only
-    when `G(s)` falls like `1/s²` at high frequency:
+    The inverse of [`acceleration_to_position`][] (Doerrer et al. 2022, eq. 6). The result
+    is proper only when `G(s)` falls like `1/s²` at high frequency:
 
     - `RationalTF`: needs `len(den) - len(num) >= 2` (checked at trace time; strip leading
       zero numerator coefficients first); the numerator gains two trailing zeros.
@@ -592,7 +588,9 @@ def _check_frf(H, omega, axis: int, who: str) -> tuple[Array, Array, int]:
 def acceleration_to_position_frf(
     H: Shaped[ArrayLike, "..."], omega: Float[ArrayLike, " freq"], *, axis: int = -1
 ) -> Shaped[Array, "..."]:
-    """Integrate an FRF twice in the frequency domain: `H / (jω)² = -H / ω²` (study eq. 6).
+    """Integrate an FRF twice in the frequency domain: `H / (jω)² = -H / ω²`.
+
+    Doerrer et al. 2022, eq. 6: acceleration data are integrated in the frequency domain.
 
     Turns an accelerance (acceleration per force) into a receptance, or an acceleration
     spectrum into a position spectrum. A transmissibility (ratio of two such FRFs) is
@@ -626,7 +624,9 @@ def acceleration_to_position_frf(
 def position_to_acceleration_frf(
     H: Shaped[ArrayLike, "..."], omega: Float[ArrayLike, " freq"], *, axis: int = -1
 ) -> Shaped[Array, "..."]:
-    """Differentiate an FRF twice in the frequency domain: `H (jω)² = -ω² H` (study eq. 6).
+    """Differentiate an FRF twice in the frequency domain: `H (jω)² = -ω² H`.
+
+    The inverse of [`acceleration_to_position_frf`][] (Doerrer et al. 2022, eq. 6).
 
     **Arguments:**
 

@@ -1,7 +1,7 @@
 """Model families over a scheduling variable (e.g. the position of another axis).
 
 A family is one model whose parameters carry a leading batch axis. The TMF study
-(/work/shared/seeds/002, §3.2, Fig. 6) measures transmissibilities that change with the
+(Doerrer et al. 2022, §3.2, Fig. 6) measures transmissibilities that change with the
 position of the other axis; these classes turn such measurements, or a parametric law,
 into one batched model at any set of positions, so that `frequency_response` and
 `simulate` evaluate every position in one vectorised call, and calibration can
@@ -110,9 +110,7 @@ def pchip_slopes(x: Float[Array, " point"], y: Float[Array, "point ..."]) -> Arr
     return jnp.concatenate([first[None], inner, last[None]], axis=0)
 
 
-def _interpolate_leaf(
-    leaf: Array, grid: Array, idx: Array, t: Array, method: str
-) -> Array:
+def _interpolate_leaf(leaf: Array, grid: Array, idx: Array, t: Array, method: str) -> Array:
     """Interpolate one parameter array `(point, *core)` at positions given by `(idx, t)`."""
     if jnp.iscomplexobj(leaf):
         re = _interpolate_leaf(leaf.real, grid, idx, t, method)
@@ -139,7 +137,8 @@ def _interpolate_leaf(
 class GridFamily(eqx.Module):
     """A model family given at grid points of a scheduling variable, interpolated between.
 
-    E.g. a `ModalModel` fitted at each of 8 positions of the y-axis (TMF study, Fig. 6):
+    E.g. a `ModalModel` fitted at each of 8 positions of the y-axis (Doerrer et al. 2022,
+    Fig. 6):
     `GridFamily(y_grid, model)` with `model.batch_shape == (8,)`, and
     `family.at(y)` the batched model at any positions `y` inside the grid.
 

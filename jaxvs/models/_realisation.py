@@ -73,12 +73,17 @@ def _pairing_order(p: Complex[Array, " n"]) -> Array:
     """Indices that put conjugate pairs next to each other, complex before real.
 
     Keys, most significant first: `-|Im p|` (complex pairs first, real poles last), `Re p`,
-    `Im p`. LAPACK returns conjugate pairs exactly conjugate and real eigenvalues with
-    an exactly zero imaginary part, so consecutive positions `(0, 1), (2, 3), ...` are
-    always a conjugate pair or two real poles. (Repeated complex pairs are defective and
-    not supported by any modal form.)
+    the occurrence index `k` of `p` among bitwise-equal poles, `Im p`. LAPACK returns
+    conjugate pairs exactly conjugate and real eigenvalues with an exactly zero imaginary
+    part, so consecutive positions `(0, 1), (2, 3), ...` are always a conjugate pair or two
+    real poles. `k` interleaves exactly repeated, non-defective pairs (e.g. one copy of each
+    mode per input in the realisation of a MIMO `ModalModel`) as `λ̄, λ, λ̄, λ` instead of
+    `λ̄, λ̄, λ, λ`. (Defective repeated pairs are not supported by any modal form.)
     """
-    return jnp.lexsort((p.imag, p.real, -jnp.abs(p.imag)))
+    n = p.shape[0]
+    idx = jnp.arange(n)
+    k = jnp.sum((p[None, :] == p[:, None]) & (idx[None, :] < idx[:, None]), axis=1)
+    return jnp.lexsort((p.imag, k, p.real, -jnp.abs(p.imag)))
 
 
 def from_poles(
