@@ -142,6 +142,8 @@ def run_demo(out: str = "demo-report", n_positions: int = 8, seed: int = 0) -> i
     print()
     print(md)
     print()
-    print(f"wrote {out_dir / 'report.json'}, {out_dir / 'report.md'}, "
-          f"{out_dir / 'tmf_family_bode.png'} ({summary['total_seconds']:.1f} s)")
+    print(
+        f"wrote {out_dir / 'report.json'}, {out_dir / 'report.md'}, "
+        f"{out_dir / 'tmf_family_bode.png'} ({summary['total_seconds']:.1f} s)"
+    )
     return 0

@@ -12,7 +12,9 @@ def tree_allclose(x, y, *, rtol=1e-5, atol=1e-8) -> bool:
     ly, ty = jax.tree_util.tree_flatten(y)
     if tx != ty:
         return False
-    return all(np.allclose(np.asarray(a), np.asarray(b), rtol=rtol, atol=atol) for a, b in zip(lx, ly))
+    return all(
+        np.allclose(np.asarray(a), np.asarray(b), rtol=rtol, atol=atol) for a, b in zip(lx, ly)
+    )
 
 
 def random_modal(rng: np.random.Generator, n_modes: int = 4, *, f_lo=5.0, f_hi=500.0):
@@ -40,7 +42,10 @@ def random_rational(rng: np.random.Generator, order: int = 8, *, proper_equal: b
 # Registries: every linear model family, as (name, factory(rng)) pairs.
 LINEAR_MODELS = [
     ("rational", lambda rng: random_rational(rng, 8)),
-    ("rational_odd", lambda rng: jaxvs.RationalTF(jnp.array([1.0, 2.0, 3.0]), jnp.array([1.0, 6.0, 11.0, 6.0]))),
+    (
+        "rational_odd",
+        lambda rng: jaxvs.RationalTF(jnp.array([1.0, 2.0, 3.0]), jnp.array([1.0, 6.0, 11.0, 6.0])),
+    ),
     ("modal", lambda rng: random_modal(rng, 4)),
     (
         "modal_complex",

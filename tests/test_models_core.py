@@ -4,9 +4,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.signal as sig
+from helpers import LINEAR_MODELS, random_modal
 
 import jaxvs
-from helpers import LINEAR_MODELS, random_modal
 
 
 @pytest.mark.parametrize("name,factory", LINEAR_MODELS)
@@ -34,7 +34,8 @@ def test_modal_real_residues_closed_form():
     w = np.linspace(1, 5000, 300)
     s = 1j * w
     expected = sum(
-        float(m.residues[k]) / (s**2 + 2 * float(m.zeta[k] * m.omega_n[k]) * s + float(m.omega_n[k]) ** 2)
+        float(m.residues[k])
+        / (s**2 + 2 * float(m.zeta[k] * m.omega_n[k]) * s + float(m.omega_n[k]) ** 2)
         for k in range(3)
     )
     np.testing.assert_allclose(np.asarray(jaxvs.frequency_response(m, w)), expected, rtol=1e-12)
@@ -64,7 +65,9 @@ def test_family_batch_axes():
     g = jaxvs.frequency_response(fam, w)
     assert g.shape == (5, 40)
     for i, m in enumerate(members):
-        np.testing.assert_allclose(np.asarray(g[i]), np.asarray(jaxvs.frequency_response(m, w)), rtol=1e-13)
+        np.testing.assert_allclose(
+            np.asarray(g[i]), np.asarray(jaxvs.frequency_response(m, w)), rtol=1e-13
+        )
 
 
 def test_bad_inputs():
@@ -75,6 +78,8 @@ def test_bad_inputs():
     with pytest.raises(ValueError, match="inconsistent shapes"):
         jaxvs.StateSpace(jnp.eye(2), jnp.ones((3, 1)), jnp.ones((1, 2)), jnp.zeros((1, 1)))
     with pytest.raises(ValueError, match="1-D"):
-        jaxvs.frequency_response(jaxvs.RationalTF(jnp.array([1.0]), jnp.array([1.0, 1.0])), np.ones((2, 2)))
+        jaxvs.frequency_response(
+            jaxvs.RationalTF(jnp.array([1.0]), jnp.array([1.0, 1.0])), np.ones((2, 2))
+        )
     with pytest.raises(Exception, match="omega_n must be > 0"):
         jaxvs.ModalModel(jnp.array([-1.0]), jnp.array([0.1]), jnp.array([1.0]))

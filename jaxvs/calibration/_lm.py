@@ -13,9 +13,10 @@ and an optimum on the boundary is approached geometrically instead of by rejecte
 Algorithm: Marquardt's scaled damping `(JᵀJ + μ diag(JᵀJ)) δ = -Jᵀr` (Marquardt 1963,
 SIAM J. Appl. Math. 11(2)), Nielsen's update of `μ` from the gain ratio (Nielsen 1999,
 IMM-REP-1999-05; Madsen, Nielsen & Tingleff 2004, *Methods for non-linear least squares
-problems*, Alg. 3.16), and MINPACK-style stopping rules (Moré 1978, "The Levenberg-Marquardt
-algorithm: implementation and theory"): relative reductions of the cost below `rtol`, or a
-scaled step below `rtol` relative to the scaled parameters.
+problems*, Alg. 3.16), and stopping rules on the undamped Gauss-Newton step (see
+`_newton_converged`), so that a step kept small by the damping is never mistaken for
+convergence, plus MINPACK's relative-reduction test (Moré 1978, "The Levenberg-Marquardt
+algorithm: implementation and theory") for steps shortened at the feasible boundary.
 
 [`batched_while`][] runs any per-member iteration over a family with *work compaction*:
 blocks of still-running members are iterated a few steps at a time, so a few slow members
@@ -122,10 +123,31 @@ def _finite(*xs) -> Array:
     return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in xs]))
 
 
-def lm_init(evaluate, theta0: Array, args: Any, mu0: float = 1e-3) -> LMState:
+def _newton_converged(theta, cost, jtj, jtr, rtol) -> Array:
+    """Convergence of the Gauss-Newton model at `θ` (no step needed).
+
+    With the undamped step `δ = -(JᵀJ)⁻¹ Jᵀr`: the largest reduction the model predicts,
+    `½ (Jᵀr)ᵀ (JᵀJ)⁻¹ Jᵀr`, is below `rtol · cost` (noisy data: parameters within a tiny
+    fraction of their standard errors of the optimum, however flat some directions are),
+    or `δ` is below `rtol` relative to `θ` in the unit-diagonal scaling (zero-residual
+    data, where the relative reduction stays O(1) until rounding).
+    """
+    d = jnp.diagonal(jtj)
+    sc = 1.0 / jnp.sqrt(jnp.where(d > 0, d, 1.0))
+    m = jtj * sc[:, None] * sc[None, :] + 1e-13 * jnp.eye(jtj.shape[0], dtype=jtj.dtype)
+    chol = jnp.linalg.cholesky(m)
+    y = jax.scipy.linalg.cho_solve((chol, True), -jtr * sc)  # scaled Newton step
+    pred = -0.5 * jnp.dot(jtr * sc, y)
+    small_pred = pred <= rtol * cost
+    small_step = jnp.linalg.norm(y) <= rtol * (jnp.linalg.norm(theta / sc) + rtol)
+    return _finite(y) & (small_pred | small_step) | (cost == 0)
+
+
+def lm_init(evaluate, theta0: Array, args: Any, rtol, mu0: float = 1e-3) -> LMState:
     """State at a starting point (one evaluation of the normal equations)."""
     cost0, jtj0, jtr0 = evaluate(theta0, args)
     dtype = theta0.dtype
+    finite = _finite(cost0, jtj0, jtr0)
     return LMState(
         theta=theta0,
         cost=cost0,
@@ -134,17 +156,16 @@ def lm_init(evaluate, theta0: Array, args: Any, mu0: float = 1e-3) -> LMState:
         mu=jnp.asarray(mu0, dtype),
         nu=jnp.asarray(2.0, dtype),
         num_steps=jnp.asarray(0),
-        # A zero residual is already optimal (noiseless data and an exact initial guess).
-        converged=cost0 == 0,
-        nonfinite=~_finite(cost0, jtj0, jtr0),
+        converged=finite & _newton_converged(theta0, cost0, jtj0, jtr0, rtol),
+        nonfinite=~finite,
     )
 
 
-def lm_running(state: LMState, max_steps: int) -> Bool[Array, ""]:
+def lm_running(state: LMState, max_steps) -> Bool[Array, ""]:
     return (~state.converged) & (~state.nonfinite) & (state.num_steps < max_steps)
 
 
-def lm_step(evaluate, feasible, state: LMState, args: Any, rtol: float) -> LMState:
+def lm_step(evaluate, feasible, state: LMState, args: Any, rtol) -> LMState:
     """One trial step: solve, shorten to the feasible set, evaluate, accept or reject."""
     s = state
     delta, sc = _damped_step(s.jtj, s.jtr, s.mu)
@@ -165,21 +186,26 @@ def lm_step(evaluate, feasible, state: LMState, args: Any, rtol: float) -> LMSta
         s.mu * s.nu,
     )
     nu = jnp.where(accept, 2.0, 2.0 * s.nu)
-    # Stopping rules (MINPACK lmder's ftol and xtol tests, with ftol = xtol = rtol).
-    small_reduction = accept & (actual <= rtol * s.cost) & (pred <= rtol * s.cost)
-    step_norm = jnp.linalg.norm(delta / sc)
-    theta_norm = jnp.linalg.norm(s.theta / sc)
-    small_step = _finite(delta) & (step_norm <= rtol * (theta_norm + rtol))
     pick = lambda new, old: jnp.where(accept, new, old)
+    theta, cost, jtj, jtr = (
+        pick(trial, s.theta),
+        pick(cost_t, s.cost),
+        pick(jtj_t, s.jtj),
+        pick(jtr_t, s.jtr),
+    )
+    # An optimum on the boundary of the feasible set: shortened steps that no longer
+    # reduce the cost by more than rtol (MINPACK's ftol test, for those steps only).
+    at_boundary = accept & (frac < 1) & (actual <= rtol * s.cost) & (pred <= rtol * s.cost)
+    converged = at_boundary | _newton_converged(theta, cost, jtj, jtr, rtol)
     return LMState(
-        theta=pick(trial, s.theta),
-        cost=pick(cost_t, s.cost),
-        jtj=pick(jtj_t, s.jtj),
-        jtr=pick(jtr_t, s.jtr),
+        theta=theta,
+        cost=cost,
+        jtj=jtj,
+        jtr=jtr,
         mu=mu,
         nu=nu,
         num_steps=s.num_steps + 1,
-        converged=small_reduction | small_step | (accept & (cost_t == 0)),
+        converged=converged,
         # A damping that overflows means no step can be taken any more.
         nonfinite=~jnp.isfinite(mu),
     )

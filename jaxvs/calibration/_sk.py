@@ -52,10 +52,10 @@ class Grid(eqx.Module):
 
 
 def make_grid(nu: Float[Array, " freq"], n: int) -> Grid:
-    """Grid with `ν^{2k}`, `k = 0 … n` (repeated products: exact powers)."""
+    """Grid with `ν^{2k}`, `k = 0 … max(n, 1)` (repeated products: exact powers)."""
     mu = nu * nu
     rows = [jnp.ones_like(nu)]
-    for _ in range(n):
+    for _ in range(max(n, 1)):
         rows.append(rows[-1] * mu)
     return Grid(nu, jnp.stack(rows, axis=0))
 
@@ -71,13 +71,22 @@ def make_grid(nu: Float[Array, " freq"], n: int) -> Grid:
 # halves the work of both.
 
 
+def _horner(coef: Array, mu: Array) -> Array:
+    """`Σ_k coef_k μ^k` by Horner's rule: elementwise, so XLA fuses it with its consumers."""
+    acc = jnp.broadcast_to(coef[-1], mu.shape)
+    for c in coef[-2::-1]:
+        acc = acc * mu + c
+    return acc
+
+
 def evaluate(coef: Float[Array, " k"], grid: Grid) -> tuple[Array, Array]:
     """`Σ_k coef_k (j ν)^k` at every point (ascending coefficients), as `(re, im)`."""
     ce, co = coef[0::2], coef[1::2]
-    sign_e = (-1.0) ** np.arange(ce.shape[0])
-    sign_o = (-1.0) ** np.arange(co.shape[0])
-    re = (ce * sign_e) @ grid.even_powers[: ce.shape[0]]
-    im = grid.nu * ((co * sign_o) @ grid.even_powers[: co.shape[0]])
+    mu = grid.even_powers[1]
+    re = _horner(ce * (-1.0) ** np.arange(ce.shape[0]), mu)
+    if co.shape[0] == 0:
+        return re, jnp.zeros_like(re)
+    im = grid.nu * _horner(co * (-1.0) ** np.arange(co.shape[0]), mu)
     return re, im
 
 
@@ -192,9 +201,13 @@ def sk_step_relaxed(
 
 
 def refit_numerator(
-    alpha: Float[Array, " n"], data: Data, grid: Grid, nb: int
-) -> Float[Array, " nb1"]:
-    """Numerator minimising `Σ w² |B/A - H|²` for a fixed denominator (linear least squares)."""
+    alpha: Float[Array, " n"], data: Data, grid: Grid, nb: int, *, with_cost: bool = False
+):
+    """Numerator minimising `Σ w² |B/A - H|²` for a fixed denominator (linear least squares).
+
+    With `with_cost=True` also returns that minimum, `½ (Σ w² |H|² - βᵀ g)` with `g` the
+    right-hand side of the normal equations `M β = g` (so `βᵀ M β = βᵀ g`).
+    """
     hr, hi, w2 = data
     ar, ai = evaluate(denominator(alpha), grid)
     rho = w2 / (ar**2 + ai**2)
@@ -203,7 +216,11 @@ def refit_numerator(
     z_im = rho * (hr * ai + hi * ar)
     lam, z_re, z_im = _moments([rho, z_re], [z_im], grid)
     gram = _gram(lam, lam, lam, lam, nb, 0)
-    return solve_spd(gram, _re_conj_j(z_re, z_im, nb + 1))
+    rhs = _re_conj_j(z_re, z_im, nb + 1)
+    beta = solve_spd(gram, rhs)
+    if not with_cost:
+        return beta
+    return beta, 0.5 * (jnp.sum(w2 * (hr**2 + hi**2)) - jnp.dot(beta, rhs))
 
 
 def _model(theta, grid, nb):

@@ -11,6 +11,7 @@ from ._excitation import (
     trapezoid as trapezoid,
     white_noise as white_noise,
 )
+from ._frf import FRF_KINDS as FRF_KINDS, FRFData as FRFData
 from ._loaders import (
     SUPPORTED_SUFFIXES as SUPPORTED_SUFFIXES,
     load as load,
@@ -30,4 +31,3 @@ from ._splits import (
     split_blocks as split_blocks,
     split_experiments as split_experiments,
 )
-from ._frf import FRF_KINDS as FRF_KINDS, FRFData as FRFData

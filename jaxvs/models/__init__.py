@@ -17,9 +17,14 @@ from ._convert import (
     to_modal as to_modal,
     to_rational as to_rational,
 )
+from ._discretise import (
+    DiscreteModalRealisation as DiscreteModalRealisation,
+    discretise as discretise,
+)
 from ._family import GridFamily as GridFamily, SmoothFamily as SmoothFamily
 from ._modal import ModalModel as ModalModel
 from ._rational import RationalTF as RationalTF
 from ._realisation import ModalRealisation as ModalRealisation
 from ._response import frequency_response as frequency_response
+from ._simulate import simulate as simulate
 from ._statespace import StateSpace as StateSpace

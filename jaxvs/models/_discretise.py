@@ -196,9 +196,7 @@ def _exp_and_integral(a: Array, h: Array) -> tuple[Array, Array]:
     return jax.lax.fori_loop(0, _MAX_SQUARINGS, square, (e, g))
 
 
-def discretise_realisation(
-    r: ModalRealisation, dt: Array, method: str
-) -> DiscreteModalRealisation:
+def discretise_realisation(r: ModalRealisation, dt: Array, method: str) -> DiscreteModalRealisation:
     """Discretise one (unbatched) modal realisation block by block; see [`discretise`][]."""
     a, b, c, d = r.a, r.b, r.c, r.d
     h = dt.astype(a.dtype)
@@ -264,13 +262,9 @@ def discretise(
     A [`DiscreteModalRealisation`][] whose arrays carry the model's batch axes.
     """
     if not isinstance(model, AbstractLinearModel):
-        raise TypeError(
-            f"discretise: expected a jaxvs linear model, got {type(model).__name__}."
-        )
+        raise TypeError(f"discretise: expected a jaxvs linear model, got {type(model).__name__}.")
     _check_method(method, "discretise")
     dt_arr = _check_dt(dt, "discretise")
-    out = map_batch(
-        lambda m: discretise_realisation(m.modal_realisation(), dt_arr, method), model
-    )
+    out = map_batch(lambda m: discretise_realisation(m.modal_realisation(), dt_arr, method), model)
     # map_batch stacks every output leaf; the sample time is one scalar for the family.
     return eqx.tree_at(lambda r: r.dt, out, dt_arr.astype(out.a.dtype))

@@ -44,7 +44,7 @@ from ._realisation import ModalRealisation, from_dense
 # Engine parameters (heuristics tuned on a 2-core x86 CPU, see benchmarks/simulate.py).
 _K = 16  # samples per block (Toeplitz size)
 _LMIN = 16  # the block-state recursion is a plain scan below this length
-_GROUP_SAMPLES = 2**18  # samples (x channels) per lane group, to stay cache resident
+_GROUP_SAMPLES = 2**20  # samples (x channels) per lane group (heuristic, measured)
 
 
 # ---------------------------------------------------------------------------------------
@@ -54,7 +54,10 @@ _GROUP_SAMPLES = 2**18  # samples (x channels) per lane group, to stay cache res
 
 def _bmm(a: Array, b: Array) -> Array:
     """Block-wise product of two block-diagonal matrices (elementwise over blocks)."""
-    return a[..., :, 0, None, :] * b[..., None, 0, :, :] + a[..., :, 1, None, :] * b[..., None, 1, :, :]
+    return (
+        a[..., :, 0, None, :] * b[..., None, 0, :, :]
+        + a[..., :, 1, None, :] * b[..., None, 1, :, :]
+    )
 
 
 def _bmv(m: Array, x: Array) -> Array:
@@ -98,7 +101,10 @@ def _tables(r: DiscreteModalRealisation, k: int) -> dict[str, Array]:
     rr = jnp.moveaxis(rr, -1, 2).reshape(n_lanes, k * m, 2 * nb)
     # (C Ad^k)[o, col, blk]: (L, K, out, 2, nb)
     pk = pw[:, :k]
-    ca = c[:, None, :, 0, None, :] * pk[:, :, None, 0] + c[:, None, :, 1, None, :] * pk[:, :, None, 1]
+    ca = (
+        c[:, None, :, 0, None, :] * pk[:, :, None, 0]
+        + c[:, None, :, 1, None, :] * pk[:, :, None, 1]
+    )
     # Markov parameters h_0 = Dd, h_i = C Ad^(i-1) Bd: (L, K, out, in)
     h1 = jnp.sum(ca[:, : k - 1, :, :, :, None] * b[:, None, None], axis=(3, 4))
     h = jnp.concatenate([d[:, None], h1], axis=1)
@@ -151,9 +157,7 @@ def _level_powers(m: Array, plan: tuple[int, ...]) -> tuple[tuple[Array, ...], A
     return tuple(out), m
 
 
-def _block_states(
-    mps: tuple[Array, ...], mtop: Array, z: Array, s0: Array
-) -> tuple[Array, Array]:
+def _block_states(mps: tuple[Array, ...], mtop: Array, z: Array, s0: Array) -> tuple[Array, Array]:
     """States `s_i` of `s_{i+1} = M s_i + z_i` for `i = 0 .. L-1` (`s_0` given), and `s_L`.
 
     `z (g, L, 2, nb)`, `s0 (g, 2, nb)`; `mps[l] (g|1, P_l+1, 2, 2, nb)` are the powers of
@@ -193,8 +197,16 @@ _MSG_OVERFLOW = (
 )
 
 
-def _run_group(tab: dict[str, Any], u: Array, s0: Array, tab_lanes: bool, u_lanes: bool,
-               k: int, siso_in: bool, siso_out: bool) -> Array:
+def _run_group(
+    tab: dict[str, Any],
+    u: Array,
+    s0: Array,
+    tab_lanes: bool,
+    u_lanes: bool,
+    k: int,
+    siso_in: bool,
+    siso_out: bool,
+) -> Array:
     """Simulate one group of lanes.
 
     `u (g?, N)` (single input) or `(g?, N, in)`, `s0 (g, 2, nb)`; returns `y (g, N)` (single
@@ -221,9 +233,7 @@ def _run_group(tab: dict[str, Any], u: Array, s0: Array, tab_lanes: bool, u_lane
     # input itself is scanned only to word the message (off the fast path). The check is
     # an added zero so that the error sits on the path of y without copying y.
     bad = ~jnp.all(jnp.isfinite(s_end))
-    bad_u = jax.lax.cond(
-        bad, lambda: ~jnp.all(jnp.isfinite(u)), lambda: jnp.array(False)
-    )
+    bad_u = jax.lax.cond(bad, lambda: ~jnp.all(jnp.isfinite(v)), lambda: jnp.array(False))
     chk = eqx.error_if(jnp.zeros((), s.dtype), bad_u, _MSG_NAN)
     chk = eqx.error_if(chk, bad & ~bad_u, _MSG_OVERFLOW)
     y = _bdot(v, tab["T"], u_lanes, tab_lanes) + (
@@ -238,8 +248,16 @@ def _group_target(n_lanes: int, n_samples: int, channels: int) -> int:
     return max(1, min(n_lanes, _GROUP_SAMPLES // max(1, n_samples * channels)))
 
 
-def _engine(tab: dict[str, Any], u: Array, s0: Array, tab_lanes: bool, u_lanes: bool,
-            k: int, siso_in: bool, siso_out: bool) -> Array:
+def _engine(
+    tab: dict[str, Any],
+    u: Array,
+    s0: Array,
+    tab_lanes: bool,
+    u_lanes: bool,
+    k: int,
+    siso_in: bool,
+    siso_out: bool,
+) -> Array:
     """All lanes, in groups of `g` mapped with `jax.lax.map`.
 
     `tab` leaves carry a leading lane axis when `tab_lanes`, `u` when `u_lanes`; `s0` always
@@ -399,13 +417,12 @@ def simulate(
     u = jnp.asarray(u)
     cdt = _float_dtype(u, who)
     u = u.astype(cdt)
-    m, p = model.n_inputs, model.n_outputs
+    m = model.n_inputs
     core = 1 if m == 1 else 2
     if u.ndim < core:
         expected = "(*batch, time)" if m == 1 else f"(*batch, time, {m})"
         raise ValueError(
-            f"{who}: u has shape {u.shape}; this model has {m} input(s), so u must be "
-            f"{expected}."
+            f"{who}: u has shape {u.shape}; this model has {m} input(s), so u must be {expected}."
         )
     if m > 1 and u.shape[-1] != m:
         raise ValueError(
@@ -438,12 +455,15 @@ def simulate(
             )
     dt_arr = _check_dt(dt, who)
     u_flat = u.reshape((-1,) + u.shape[-core:]) if u_batch else u
-    y = _simulate_flat(model, u_flat, dt_arr, x0, method, batch, bool(u_batch))
+    # The engine parameters are part of the jit cache key (they are module-level
+    # heuristics, read at trace time).
+    config = (_K, _LMIN, _GROUP_SAMPLES)
+    y = _simulate_flat(model, u_flat, dt_arr, x0, method, batch, bool(u_batch), config)
     return y.reshape(batch + y.shape[1:])
 
 
 @eqx.filter_jit
-def _simulate_flat(model, u, dt, x0, method, batch, u_lanes):
+def _simulate_flat(model, u, dt, x0, method, batch, u_lanes, config):
     """Discretise, build tables and run the engine on flattened lanes (jitted)."""
     cdt = u.dtype
     n_lanes = math.prod(batch)
@@ -459,10 +479,18 @@ def _simulate_flat(model, u, dt, x0, method, batch, u_lanes):
         rd = map_batch(lambda mm: discretise_realisation(mm.modal_realisation(), dt, method), model)
         tmap = None
     tab_lanes = m_batch != ()
-    flat = (lambda x: x.reshape((-1,) + x.shape[len(m_batch) :])) if tab_lanes else (lambda x: x[None])
+    flat = (
+        (lambda x: x.reshape((-1,) + x.shape[len(m_batch) :])) if tab_lanes else (lambda x: x[None])
+    )
     rflat = DiscreteModalRealisation(
-        flat(rd.a), flat(rd.b), flat(rd.c), flat(rd.d), flat(rd.b1), dt,
-        method=method, n_states=rd.n_states,
+        flat(rd.a),
+        flat(rd.b),
+        flat(rd.c),
+        flat(rd.d),
+        flat(rd.b1),
+        dt,
+        method=method,
+        n_states=rd.n_states,
     )
     m, p = rflat.b.shape[-1], rflat.c.shape[-3]
     siso_in, siso_out = m == 1, p == 1

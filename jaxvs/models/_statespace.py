@@ -2,7 +2,6 @@
 
 from typing import TYPE_CHECKING
 
-import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
@@ -48,12 +47,7 @@ class StateSpace(AbstractLinearModel):
                     f"{x.shape}. Use e.g. B.reshape(-1, 1) for a single input."
                 )
         n, m, p = A.shape[-1], B.shape[-1], C.shape[-2]
-        if (
-            A.shape[-2] != n
-            or B.shape[-2] != n
-            or C.shape[-1] != n
-            or D.shape[-2:] != (p, m)
-        ):
+        if A.shape[-2] != n or B.shape[-2] != n or C.shape[-1] != n or D.shape[-2:] != (p, m):
             raise ValueError(
                 "StateSpace: inconsistent shapes "
                 f"A{A.shape}, B{B.shape}, C{C.shape}, D{D.shape}; expected A (n, n), "
@@ -83,7 +77,9 @@ class StateSpace(AbstractLinearModel):
         n = self.order
         eye = jnp.eye(n, dtype=s.dtype)
         M = s[:, None, None] * eye - self.A.astype(s.dtype)
-        X = jnp.linalg.solve(M, jnp.broadcast_to(self.B.astype(s.dtype), (s.shape[0],) + self.B.shape))
+        X = jnp.linalg.solve(
+            M, jnp.broadcast_to(self.B.astype(s.dtype), (s.shape[0],) + self.B.shape)
+        )
         return jnp.einsum("on,fni->foi", self.C.astype(s.dtype), X) + self.D
 
     def modal_realisation(self) -> "ModalRealisation":

@@ -3,10 +3,8 @@
 from collections.abc import Sequence
 
 import matplotlib
-
-matplotlib.use("Agg", force=False)
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 
 def bode_plot(
@@ -74,7 +72,9 @@ def bode_plot(
             ax_m.semilogx(f, 20 * np.log10(np.maximum(mag, 1e-300)), fmt, **kw)
         else:
             ax_m.loglog(f, mag, fmt, **kw)
-        ax_p.semilogx(f, np.degrees(np.angle(c)), fmt, **{k: v for k, v in kw.items() if k != "label"})
+        ax_p.semilogx(
+            f, np.degrees(np.angle(c)), fmt, **{k: v for k, v in kw.items() if k != "label"}
+        )
     unit = f" [{magnitude_unit}]" if magnitude_unit else ""
     ax_m.set_ylabel(("magnitude [dB]" if db else "magnitude") + unit)
     ax_p.set_ylabel("phase [deg]")

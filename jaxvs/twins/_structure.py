@@ -20,8 +20,8 @@ import jax
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
-from scipy.signal import butter
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
+from scipy.signal import butter
 
 from ..models import OscillatorChain
 
@@ -143,7 +143,7 @@ class MachineStructureTwin(eqx.Module):
         """
         from ..data import prbs
         from ..models import RationalTF
-        from ..models._simulate import simulate
+        from ..models import simulate
 
         y = np.atleast_1d(np.asarray(y, float))
         force = force_amplitude * np.asarray(prbs(prbs_order, n_periods=n_periods), float)
