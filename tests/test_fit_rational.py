@@ -211,7 +211,7 @@ def test_batched_while_compaction_matches_per_member_loop():
         return (0.5 * (s[0] + a_ / s[0]), s[1] + 1)
 
     x0 = (jnp.ones_like(a), jnp.zeros(a.shape, int))
-    x, k = batched_while(cond, body, x0, a, block=3, block_steps=2)
+    x, k = batched_while(cond, body, x0, a, block=3, first_steps=4, block_steps=2)
     np.testing.assert_allclose(np.asarray(x), np.sqrt(np.asarray(a)), rtol=1e-11)
     for i in range(a.size):
         ref = jax.lax.while_loop(lambda s: cond(s, a[i]), lambda s: body(s, a[i]), (1.0, 0))

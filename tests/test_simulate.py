@@ -250,10 +250,7 @@ def test_gradients_rational_coefficients():
     fd_den = _fd_grad(lambda x: float(loss(jnp.asarray(num), jnp.asarray(x))), den, 1e-6)
     # central differences: truncation O(h²) and cancellation ~eps/h, ~1e-8 relative here
     np.testing.assert_allclose(np.asarray(g_num), fd_num, rtol=1e-5)
-    np.testing.assert_allclose(np.asarray(g_den[1:]), fd_den[1:], rtol=1e-5)
-    # forward mode agrees with reverse mode
-    jf = jax.jacfwd(loss, argnums=1)(jnp.asarray(num), jnp.asarray(den))
-    np.testing.assert_allclose(np.asarray(jf), np.asarray(g_den), rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(g_den), fd_den, rtol=1e-5)
 
 
 def test_gradients_modal_parameters():
@@ -429,6 +426,10 @@ def test_bad_shapes_and_method(model):
         jaxvs.simulate(model, np.ones((2, N)), DT, x0=np.zeros((3, 4)))
     with pytest.raises(TypeError, match="real"):
         jaxvs.simulate(model, np.ones(N) * 1j, DT)
+    with pytest.raises(TypeError, match="x0 must be real"):
+        jaxvs.simulate(model, np.ones(N), DT, x0=np.ones(4) * 1j)
+    with pytest.raises(TypeError, match="dt must be real"):
+        jaxvs.simulate(model, np.ones(N), 1e-3 + 0j)
     with pytest.raises(TypeError, match="linear model"):
         jaxvs.simulate("not a model", np.ones(N), DT)
     mimo = jaxvs.ModalModel(jnp.array([10.0]), jnp.array([0.1]), jnp.ones((1, 2, 3)))

@@ -23,8 +23,10 @@ _SK_TOL = 1e-4
 # Heuristic work-compaction schedule of `batched_while`: blocks of 32 members (their
 # per-iteration data, 32 x 8 x n_freq doubles, stay in the CPU caches for ~2000
 # frequencies), 8 iterations at a time.
-_BLOCK = 32
+_BLOCK = 16
 _BLOCK_STEPS = 2
+_SK_FIRST = 4
+_LM_FIRST = 3
 # Heuristic: initial Levenberg-Marquardt damping relative to the unit-diagonal scaled
 # JᵀJ; small, as the Sanathanan-Koerner start is usually in the quadratic basin.
 _MU0 = 1e-6
@@ -151,41 +153,56 @@ def _fit_batch(
     if init_theta is None:
 
         def sk_cond(c, d):
-            return (~c[2]) & (c[1] < sk_steps)
+            return (~c[3]) & (c[2] < sk_steps)
 
         def sk_body(c, d):
-            alpha, k, _ = c
-            new = _sk.sk_step_relaxed(alpha, d, grid, nb)
+            alpha, _, k, _ = c
+            new, beta, ok = _sk.sk_step_relaxed(alpha, d, grid, nb)
             change = jnp.linalg.norm(new - alpha) / (jnp.linalg.norm(new) + 1e-300)
-            return new, k + 1, (change <= _SK_TOL) | ~jnp.all(jnp.isfinite(new))
+            done = (change <= _SK_TOL) | ~ok | ~jnp.all(jnp.isfinite(new))
+            return new, beta, k + 1, done
 
         sk0 = (
             jnp.broadcast_to(alpha_start, (size, n)),
+            jnp.zeros((size, nb + 1), dtype),
             jnp.zeros((size,), int),
             jnp.zeros((size,), bool),
         )
-        alpha_sk, k_sk, _ = batched_while(
-            sk_cond, sk_body, sk0, data, block=_BLOCK, block_steps=_BLOCK_STEPS
+        alpha_sk, beta_sk, k_sk, _ = batched_while(
+            sk_cond,
+            sk_body,
+            sk0,
+            data,
+            block=_BLOCK,
+            first_steps=_SK_FIRST,
+            block_steps=_BLOCK_STEPS,
         )
-        hurwitz = jax.vmap(_sk.is_hurwitz)(alpha_sk)
+        # The numerator of the last iteration starts Levenberg-Marquardt (its weight
+        # 1/|A_prev|² is within _SK_TOL of the output-error weight 1/|A|²), unless the
+        # poles are flipped or no iteration ran: then it is refitted for the new A.
+        flipped = stable & ~jax.vmap(_sk.is_hurwitz)(alpha_sk)
+        refit = flipped | (k_sk == 0)
 
-        def flip_all(alpha_sk):
+        def refit_all(alpha_sk):
             # Only when some member needs it (a batch-level branch: roots are expensive).
-            def one(alpha, d, ok):
+            def one(alpha, beta, d, again):
                 flipped_alpha, _ = _sk.flip_unstable(alpha)
+                alpha0 = jnp.where(stable, flipped_alpha, alpha)
+                beta0 = _sk.refit_numerator(alpha0, d, grid, nb)
                 # The unconstrained fit, to tell unstable data from a spurious pole.
-                beta_free, cost_free = _sk.refit_numerator(alpha, d, grid, nb, with_cost=True)
-                return jnp.where(ok, alpha, flipped_alpha), jnp.where(ok, jnp.inf, cost_free)
+                _, cost_free = _sk.refit_numerator(alpha, d, grid, nb, with_cost=True)
+                return (
+                    jnp.where(again, alpha0, alpha),
+                    jnp.where(again, beta0, beta),
+                    jnp.where(again, cost_free, jnp.inf),
+                )
 
-            return jax.vmap(one)(alpha_sk, data, hurwitz)
+            return _chunked(one, alpha_sk, beta_sk, data, refit)
 
         def keep(alpha_sk):
-            return alpha_sk, jnp.full((size,), jnp.inf, dtype)
+            return alpha_sk, beta_sk, jnp.full((size,), jnp.inf, dtype)
 
-        flipped = stable & ~hurwitz
-        alpha0, cost_free = jax.lax.cond(jnp.any(flipped), flip_all, keep, alpha_sk)
-        alpha0 = jnp.where(stable, alpha0, alpha_sk)
-        beta0 = _chunked(lambda a, d: _sk.refit_numerator(a, d, grid, nb), alpha0, data)
+        alpha0, beta0, cost_free = jax.lax.cond(jnp.any(refit), refit_all, keep, alpha_sk)
         theta0 = jnp.concatenate([beta0, alpha0], axis=1)
         bad_init = jnp.zeros((size,), bool)
     else:
@@ -204,6 +221,7 @@ def _fit_batch(
         state,
         data,
         block=_BLOCK,
+        first_steps=_LM_FIRST,
         block_steps=_BLOCK_STEPS,
     )
 

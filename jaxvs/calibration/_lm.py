@@ -48,6 +48,7 @@ def batched_while(
     args: PyTree,
     *,
     block: int,
+    first_steps: int,
     block_steps: int,
 ) -> PyTree:
     """`while cond(s, a): s = body(s, a)` for every member of a family, with compaction.
@@ -58,9 +59,12 @@ def batched_while(
       make `cond` false (e.g. through a step counter in the state).
     - `state`, `args`: pytrees whose leaves carry the family axis first; `args` is
       read-only.
-    - `block`, `block_steps`: the first `block` still-running members are gathered,
-      iterated (`vmap`) at most `block_steps` times, and scattered back, until no member
-      runs. A family of at most `block` members is one `vmap`-ped `while_loop`.
+    - `block`: members iterated together (`vmap`). A family of at most `block` members is
+      one `vmap`-ped `while_loop`.
+    - `first_steps`: first sweep: consecutive blocks, at most `first_steps` iterations
+      each (no data movement; enough for most members).
+    - `block_steps`: then, until no member runs: the first `block` still-running members
+      are gathered, iterated at most `block_steps` times, and scattered back.
 
     **Returns:**
 
@@ -68,20 +72,19 @@ def batched_while(
     """
     size = jax.tree_util.tree_leaves(state)[0].shape[0]
 
-    def run(st, ar, limit):
-        def one(s, a):
-            def c(carry):
-                return cond(carry[0], a) & (carry[1] < limit)
+    def one(s, a, limit):
+        def c(carry):
+            return cond(carry[0], a) & (carry[1] < limit)
 
-            def b(carry):
-                return body(carry[0], a), carry[1] + 1
+        def b(carry):
+            return body(carry[0], a), carry[1] + 1
 
-            return jax.lax.while_loop(c, b, (s, jnp.asarray(0)))[0]
-
-        return jax.vmap(one)(st, ar)
+        return jax.lax.while_loop(c, b, (s, jnp.asarray(0)))[0]
 
     if size <= block:
-        return run(state, args, jnp.iinfo(jnp.int32).max)
+        return jax.vmap(lambda s, a: one(s, a, jnp.iinfo(jnp.int32).max))(state, args)
+
+    state = jax.lax.map(lambda sa: one(*sa, first_steps), (state, args), batch_size=block)
 
     def outer_cond(st):
         return jnp.any(jax.vmap(cond)(st, args))
@@ -90,7 +93,9 @@ def batched_while(
         active = jax.vmap(cond)(st, args)
         idx = jnp.argsort(~active, stable=True)[:block]  # running members first
         take = lambda x: x[idx]
-        sub = run(jax.tree_util.tree_map(take, st), jax.tree_util.tree_map(take, args), block_steps)
+        sub = jax.vmap(lambda s, a: one(s, a, block_steps))(
+            jax.tree_util.tree_map(take, st), jax.tree_util.tree_map(take, args)
+        )
         return jax.tree_util.tree_map(lambda x, y: x.at[idx].set(y), st, sub)
 
     return jax.lax.while_loop(outer_cond, outer_body, state)

@@ -166,8 +166,8 @@ Data = tuple[Float[Array, " freq"], Float[Array, " freq"], Float[Array, " freq"]
 
 def sk_step_relaxed(
     alpha_prev: Float[Array, " n"], data: Data, grid: Grid, nb: int
-) -> Float[Array, " n"]:
-    r"""One relaxed Sanathanan-Koerner iteration; returns the new monic denominator.
+) -> tuple[Float[Array, " n"], Float[Array, " nb1"], Bool[Array, ""]]:
+    r"""One relaxed Sanathanan-Koerner iteration: the new monic denominator and numerator.
 
     Sanathanan & Koerner (1963, IEEE TAC 8(1), eq. 8) minimise the linearised error
     `Σ w² |B(x) - H A(x)|² / |A_prev(x)|²` over `(B, A)`; at a fixed point `A = A_prev`
@@ -179,6 +179,9 @@ def sk_step_relaxed(
     `min θᵀMθ s.t. cᵀθ = 1` has the solution `θ ∝ M⁻¹c`; `A` is then made monic.
     `|A_prev(jν)|` does not change when poles are reflected about the imaginary axis, so
     the iterates do not depend on pole flipping.
+
+    Returns `(α, β, ok)`; `ok` is false when the leading coefficient of `A` vanished (a
+    pole went to infinity), in which case `α = alpha_prev`.
     """
     hr, hi, w2 = data
     n = alpha_prev.shape[-1]
@@ -195,9 +198,10 @@ def sk_step_relaxed(
     theta = solve_spd(gram, c)
     alpha = theta[nb + 1 :]
     # A vanishing leading coefficient sends a pole to infinity: keep the previous
-    # denominator (the iteration then stops as converged).
+    # denominator.
     lead_ok = jnp.abs(alpha[n]) > 1e-12 * jnp.max(jnp.abs(alpha))
-    return jnp.where(lead_ok, alpha[:n] / jnp.where(lead_ok, alpha[n], 1.0), alpha_prev)
+    lead = jnp.where(lead_ok, alpha[n], 1.0)
+    return jnp.where(lead_ok, alpha[:n] / lead, alpha_prev), theta[: nb + 1] / lead, lead_ok
 
 
 def refit_numerator(
