@@ -23,7 +23,8 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 from scipy.signal import butter
 
-from ..models import OscillatorChain
+from ..data import prbs
+from ..models import OscillatorChain, RationalTF, simulate
 
 DRIVE, ENCODER, COLUMN, TCP = 0, 1, 2, 3
 
@@ -141,10 +142,6 @@ class MachineStructureTwin(eqx.Module):
         - `tcp_noise`: white noise of the reference TCP position sensor [m].
         - `oversample`: internal simulation steps per sample (continuous plant).
         """
-        from ..data import prbs
-        from ..models import RationalTF
-        from ..models import simulate
-
         y = np.atleast_1d(np.asarray(y, float))
         force = force_amplitude * np.asarray(prbs(prbs_order, n_periods=n_periods), float)
         n_t = force.shape[0]
