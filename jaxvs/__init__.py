@@ -15,6 +15,7 @@ from .calibration import (
     calibrate as calibrate,
     calibrate_family as calibrate_family,
     fit_rational as fit_rational,
+    idim_ls as idim_ls,
     modal_fit as modal_fit,
     multistart as multistart,
     stabilisation_diagram as stabilisation_diagram,

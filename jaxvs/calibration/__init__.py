@@ -12,6 +12,13 @@ from ._family import (
     multistart as multistart,
 )
 from ._fit_rational import FitReport as FitReport, fit_rational as fit_rational
+from ._idim import (
+    ForcePrediction as ForcePrediction,
+    IDIMResult as IDIMResult,
+    idim_ls as idim_ls,
+    idim_regressor as idim_regressor,
+    predict_force as predict_force,
+)
 from ._lscf import (
     PoleTrack as PoleTrack,
     StabilisationDiagram as StabilisationDiagram,
