@@ -1,5 +1,8 @@
 """Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows."""
 
+from ._differentiate import differentiate as differentiate
+from ._filter import decimate as decimate, filtfilt_lowpass as filtfilt_lowpass
+from ._resample import resample as resample
 from ._spectral import (
     coherence as coherence,
     csd as csd,
