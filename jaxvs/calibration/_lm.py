@@ -6,17 +6,20 @@ structure (e.g. rational frequency responses, see `_sk.normal_equations`) form t
 `O(data · parameters)` without the Jacobian; a generic problem can form them from
 `jax.jacfwd`. A `feasible(θ)` predicate describes an open admissible set (e.g. stable
 denominators): a step that would leave it is shortened to the largest feasible fraction
-on a geometric grid (the "fraction to the boundary" rule of interior-point methods,
-Nocedal & Wright 2006, *Numerical Optimization*, eq. 19.9), so every iterate is feasible
-and an optimum on the boundary is approached geometrically instead of by rejected steps.
+on a fixed grid (the "fraction to the boundary" rule of interior-point methods, Nocedal &
+Wright 2006, *Numerical Optimization*, eq. 19.9), so every iterate is feasible.
 
 Algorithm: Marquardt's scaled damping `(JᵀJ + μ diag(JᵀJ)) δ = -Jᵀr` (Marquardt 1963,
-SIAM J. Appl. Math. 11(2)), Nielsen's update of `μ` from the gain ratio (Nielsen 1999,
+SIAM J. Appl. Math. 11(2)) and Nielsen's update of `μ` from the gain ratio (Nielsen 1999,
 IMM-REP-1999-05; Madsen, Nielsen & Tingleff 2004, *Methods for non-linear least squares
-problems*, Alg. 3.16), and stopping rules on the undamped Gauss-Newton step (see
-`_newton_converged`), so that a step kept small by the damping is never mistaken for
-convergence, plus MINPACK's relative-reduction test (Moré 1978, "The Levenberg-Marquardt
-algorithm: implementation and theory") for steps shortened at the feasible boundary.
+problems*, Alg. 3.16). Stopping rules, all relative to `rtol`:
+
+- the undamped Gauss-Newton model predicts less than `rtol · cost` of further reduction,
+  or its step is below `rtol` relative to `θ` (see `_newton_converged`): a step kept
+  small by the damping is never mistaken for convergence;
+- at the feasible boundary, the feasible part of the step predicts less than
+  `rtol · cost` (MINPACK's relative-reduction test, Moré 1978, "The Levenberg-Marquardt
+  algorithm: implementation and theory", restricted to shortened steps).
 
 [`batched_while`][] runs any per-member iteration over a family with *work compaction*:
 blocks of still-running members are iterated a few steps at a time, so a few slow members
@@ -35,10 +38,11 @@ from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from ._results import RESULTS
 
-# Candidate fractions of a step, 2^(-k/4): a step is shortened to the largest feasible one.
-# Heuristic: the ratio 2^(1/4) keeps >= 84 % of the feasible part of a step; below 2^-12
-# the step is rejected instead.
-_FRACTIONS = 2.0 ** (-np.arange(49) / 4.0)
+# Candidate fractions of a step: a step that would leave the feasible set is shortened to
+# the largest feasible one. Heuristic: 1 - 10^-k close to 1 (an optimum on the boundary is
+# then approached in a few steps instead of geometrically slowly), then 2^(-k/4); below
+# 2^-12 the step is rejected instead.
+_FRACTIONS = np.concatenate([[1.0, 0.999, 0.99, 0.95], 2.0 ** (-np.arange(1, 49) / 4.0)])
 
 
 def batched_while(
@@ -49,6 +53,7 @@ def batched_while(
     *,
     block: int,
     first_steps: int,
+    tail_block: int,
     block_steps: int,
 ) -> PyTree:
     """`while cond(s, a): s = body(s, a)` for every member of a family, with compaction.
@@ -63,14 +68,16 @@ def batched_while(
       one `vmap`-ped `while_loop`.
     - `first_steps`: first sweep: consecutive blocks, at most `first_steps` iterations
       each (no data movement; enough for most members).
-    - `block_steps`: then, until no member runs: the first `block` still-running members
-      are gathered, iterated at most `block_steps` times, and scattered back.
+    - `tail_block`, `block_steps`: then, until no member runs, the first `tail_block`
+      still-running members are gathered, iterated at most `block_steps` times, and
+      scattered back (a small block: the few slow members do not carry idle ones).
 
     **Returns:**
 
     The final states; each equals what an unbatched `while_loop` gives for that member.
     """
     size = jax.tree_util.tree_leaves(state)[0].shape[0]
+    tail_block = min(tail_block, size)
 
     def one(s, a, limit):
         def c(carry):
@@ -91,7 +98,7 @@ def batched_while(
 
     def outer_body(st):
         active = jax.vmap(cond)(st, args)
-        idx = jnp.argsort(~active, stable=True)[:block]  # running members first
+        idx = jnp.argsort(~active, stable=True)[:tail_block]  # running members first
         take = lambda x: x[idx]
         sub = jax.vmap(lambda s, a: one(s, a, block_steps))(
             jax.tree_util.tree_map(take, st), jax.tree_util.tree_map(take, args)
@@ -102,6 +109,9 @@ def batched_while(
 
 
 class LMState(eqx.Module):
+    """Iterate of [`lm_step`][]: the best feasible point, its normal equations, the
+    damping `mu` (relative to the unit-diagonal scaled `JᵀJ`) and its growth factor `nu`."""
+
     theta: Float[Array, " p"]
     cost: Float[Array, ""]
     jtj: Float[Array, "p p"]
@@ -167,6 +177,7 @@ def lm_init(evaluate, theta0: Array, args: Any, rtol, mu0: float = 1e-3) -> LMSt
 
 
 def lm_running(state: LMState, max_steps) -> Bool[Array, ""]:
+    """Whether [`lm_step`][] should be called again."""
     return (~state.converged) & (~state.nonfinite) & (state.num_steps < max_steps)
 
 
@@ -198,9 +209,11 @@ def lm_step(evaluate, feasible, state: LMState, args: Any, rtol) -> LMState:
         pick(jtj_t, s.jtj),
         pick(jtr_t, s.jtr),
     )
-    # An optimum on the boundary of the feasible set: shortened steps that no longer
-    # reduce the cost by more than rtol (MINPACK's ftol test, for those steps only).
-    at_boundary = accept & (frac < 1) & (actual <= rtol * s.cost) & (pred <= rtol * s.cost)
+    # An optimum on the boundary of the feasible set (e.g. a spurious pole pair that would
+    # rather be unstable): the feasible part of the step no longer promises a reduction
+    # of more than rtol (in particular when no fraction of it is feasible). Following
+    # the boundary further by raising the damping gains ~1e-6 relative in many steps.
+    at_boundary = (frac < 1) & (pred <= rtol * s.cost)
     converged = at_boundary | _newton_converged(theta, cost, jtj, jtr, rtol)
     return LMState(
         theta=theta,
@@ -217,6 +230,7 @@ def lm_step(evaluate, feasible, state: LMState, args: Any, rtol) -> LMState:
 
 
 def lm_result(state: LMState) -> RESULTS:
+    """`successful`, `max_steps_reached` or `nonfinite`."""
     return RESULTS.where(
         state.nonfinite,
         RESULTS.nonfinite,
