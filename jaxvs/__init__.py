@@ -6,23 +6,48 @@ Enable float64 for calibration in your own program (library code never does it):
     jax.config.update("jax_enable_x64", True)
 """
 
-from . import calibration as calibration, data as data, models as models, signal as signal
+from . import (
+    calibration as calibration,
+    data as data,
+    diagnosis as diagnosis,
+    models as models,
+    signal as signal,
+)
+from ._io import (
+    FORMAT_VERSION as FORMAT_VERSION,
+    IncompatibleFileError as IncompatibleFileError,
+    load_header as load_header,
+    load_model as load_model,
+    load_results_csv as load_results_csv,
+    save_model as save_model,
+    save_results_csv as save_results_csv,
+)
+from ._progress import Interrupted as Interrupted, Progress as Progress, log_to as log_to
 from .calibration import (
     CalibrationResult as CalibrationResult,
     FitReport as FitReport,
     ModalFit as ModalFit,
     StabilisationDiagram as StabilisationDiagram,
+    SweepResult as SweepResult,
     calibrate as calibrate,
     calibrate_family as calibrate_family,
+    calibrate_family_sharded as calibrate_family_sharded,
+    family_mesh as family_mesh,
+    fit_first_order as fit_first_order,
     fit_rational as fit_rational,
     idim_ls as idim_ls,
     modal_fit as modal_fit,
     multistart as multistart,
+    shard_family as shard_family,
+    simulate_sharded as simulate_sharded,
     stabilisation_diagram as stabilisation_diagram,
+    sweep as sweep,
     tmf_from_modal as tmf_from_modal,
 )
+from .diagnosis import DiagnosisReport as DiagnosisReport, diagnose as diagnose
 from .models import (
     AbstractLinearModel as AbstractLinearModel,
+    FirstOrder as FirstOrder,
     GridFamily as GridFamily,
     ModalModel as ModalModel,
     NormalModes as NormalModes,
@@ -30,19 +55,24 @@ from .models import (
     RationalTF as RationalTF,
     SmoothFamily as SmoothFamily,
     StateSpace as StateSpace,
+    VirtualSensor as VirtualSensor,
     acceleration_to_position as acceleration_to_position,
     acceleration_to_position_frf as acceleration_to_position_frf,
     damping as damping,
     discretise as discretise,
     frequency_response as frequency_response,
+    from_control as from_control,
+    from_scipy as from_scipy,
     is_stable as is_stable,
     poles as poles,
     position_to_acceleration as position_to_acceleration,
     position_to_acceleration_frf as position_to_acceleration_frf,
     simulate as simulate,
     static_gain as static_gain,
+    to_control as to_control,
     to_modal as to_modal,
     to_rational as to_rational,
+    to_scipy as to_scipy,
     zeros as zeros,
 )
 

@@ -26,15 +26,128 @@ def _parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="demo-report", help="output folder (created)")
     demo.add_argument("--positions", type=int, default=8, help="number of Y positions")
     demo.add_argument("--seed", type=int, default=0, help="noise seed")
+
+    diag = sub.add_parser(
+        "diagnose",
+        help="diagnose the sim-to-real gap of a model family on measured experiments",
+        description=(
+            "Recalibrate the family's nominal model on the DATA experiments, map where it "
+            "still disagrees with the measurements, name the unmodelled effect(s) that close "
+            "the gap on held-out data, and write report.json, report.md and figures to --out. "
+            "DATA: CSV (header row, time column t [s]), NPZ, MAT or HDF5 files with the "
+            "canonical signal names of the family, or the EMPS .mat files as they are."
+        ),
+    )
+    diag.add_argument("data", nargs="+", help="calibration experiment file(s)")
+    diag.add_argument("--family", required=True, choices=["drive", "tmf", "thermal"])
+    diag.add_argument("--validate", nargs="+", default=None, help="validation experiment file(s)")
+    diag.add_argument("--out", required=True, help="output folder (created)")
+    diag.add_argument(
+        "--holdout", type=float, default=0.3, help="share held out without --validate"
+    )
+    diag.add_argument("--max-effects", type=int, default=3, help="most effects added")
+    diag.add_argument("--seed", type=int, default=0, help="bootstrap seed")
+    diag.add_argument("--order", type=int, default=None, help="tmf: TMF order (default 4)")
+    diag.add_argument("--cutoff-hz", type=float, default=None, help="drive: low-pass cut-off [Hz]")
+    diag.add_argument(
+        "--option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="further family option (repeatable), e.g. --option decimation=4",
+    )
+    diag.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    diag.add_argument("--quiet", action="store_true", help="no progress messages")
     return p
+
+
+def _parse_option(text: str) -> tuple[str, object]:
+    if "=" not in text:
+        raise SystemExit(f"jaxvs diagnose: --option expects KEY=VALUE, got {text!r}")
+    key, value = text.split("=", 1)
+    for cast in (int, float):
+        try:
+            return key.strip(), cast(value)
+        except ValueError:
+            pass
+    return key.strip(), value
+
+
+def _diagnose(args) -> int:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)  # calibration in float64 (a program may)
+    import pathlib
+
+    options = dict(_parse_option(o) for o in args.option)
+    if args.order is not None:
+        options["order"] = args.order
+    if args.cutoff_hz is not None:
+        options["cutoff_hz"] = args.cutoff_hz
+    for f in list(args.data) + list(args.validate or []):
+        if not pathlib.Path(f).exists():
+            print(f"jaxvs diagnose: no such file: {f}", file=sys.stderr)
+            return 2
+    try:
+        report = jaxvs.diagnose(
+            list(args.data),
+            list(args.validate) if args.validate else None,
+            family=args.family,
+            holdout=args.holdout,
+            max_effects=args.max_effects,
+            seed=args.seed,
+            progress=not args.quiet,
+            **options,
+        )
+    except (ValueError, TypeError) as err:
+        print(f"jaxvs diagnose: {err}", file=sys.stderr)
+        return 2
+    out = pathlib.Path(args.out)
+    if not args.no_figures:
+        from .plotting import plot_diagnosis
+
+        report.content["figures"] = plot_diagnosis(report, out)
+    report.save(out)
+    print(report.to_markdown())
+    print(f"written: {out / 'report.json'}, {out / 'report.md'}")
+    return 0
+
+
+def _compilation_cache() -> None:
+    """Keep XLA's compiled code between runs of the command (a program may configure JAX;
+    the library never does): a second `jaxvs diagnose` on data of the same size skips the
+    compilation. `JAXVS_NO_CACHE=1` switches it off, `JAX_COMPILATION_CACHE_DIR` moves it."""
+    import os
+
+    if os.environ.get("JAXVS_NO_CACHE"):
+        return
+    import jax
+
+    path = os.environ.get("JAX_COMPILATION_CACHE_DIR") or os.path.join(
+        os.path.expanduser("~"), ".cache", "jaxvs", "xla"
+    )
+    try:
+        os.makedirs(path, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", path)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+    except (OSError, AttributeError):  # read-only home or an older jax: run without cache
+        pass
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    if args.command in ("demo", "diagnose"):
+        _compilation_cache()
     if args.command == "demo":
         from ._demo import run_demo
 
         return run_demo(out=args.out, n_positions=args.positions, seed=args.seed)
+    if args.command == "diagnose":
+        try:
+            return _diagnose(args)
+        except KeyboardInterrupt:
+            print("jaxvs diagnose: interrupted; nothing was written.", file=sys.stderr)
+            return 130
     return 2  # pragma: no cover - argparse enforces the sub-command
 
 

@@ -2,6 +2,7 @@ import os
 from pathlib import Path
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+os.environ.setdefault("JAXVS_NO_CACHE", "1")  # the CLI's XLA disk cache stays off in tests
 
 import jax  # noqa: E402
 import jax.random as jr  # noqa: E402

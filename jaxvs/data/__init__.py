@@ -31,3 +31,10 @@ from ._splits import (
     split_blocks as split_blocks,
     split_experiments as split_experiments,
 )
+from ._uff import (
+    load_uff_frf as load_uff_frf,
+    load_uff_modes as load_uff_modes,
+    load_uff_record as load_uff_record,
+    save_uff as save_uff,
+    uff_datasets as uff_datasets,
+)

@@ -1,3 +1,14 @@
 """Figures: the only part of jaxvs that imports matplotlib."""
 
 from ._bode import bode_plot as bode_plot
+from ._diagnosis import plot_diagnosis as plot_diagnosis
+from ._drive import (
+    ballbar_plot as ballbar_plot,
+    loop_bode_plot as loop_bode_plot,
+    scalogram_plot as scalogram_plot,
+)
+from ._thermal import (
+    correlation_plot as correlation_plot,
+    prediction_plot as prediction_plot,
+    residual_plot as residual_plot,
+)

@@ -1,5 +1,12 @@
 """Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows."""
 
+from ._cwt import (
+    CWTDamping as CWTDamping,
+    cwt_damping as cwt_damping,
+    cwt_morlet as cwt_morlet,
+    cwt_ridge as cwt_ridge,
+    morlet_scales as morlet_scales,
+)
 from ._differentiate import differentiate as differentiate
 from ._filter import decimate as decimate, filtfilt_lowpass as filtfilt_lowpass
 from ._resample import resample as resample

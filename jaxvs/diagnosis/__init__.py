@@ -1,0 +1,19 @@
+"""Sim-to-real gap diagnosis: where a calibrated model disagrees with the machine, which
+unmodelled effect causes it, and how far the gap shrinks once it is added (DESIGN.md §3.2).
+"""
+
+from ._base import (
+    AbstractEffect as AbstractEffect,
+    AbstractFamily as AbstractFamily,
+    EffectSpec as EffectSpec,
+    Experiment as Experiment,
+    GapModel as GapModel,
+)
+from ._diagnose import FAMILIES as FAMILIES, diagnose as diagnose
+from ._gapmap import GapCell as GapCell, gap_map as gap_map
+from ._report import DiagnosisReport as DiagnosisReport
+
+EFFECTS: dict[str, tuple[str, ...]] = {
+    name: tuple(s.name for s in fam().library()) for name, fam in FAMILIES.items()
+}
+"""The effect names of each family, in library order (DESIGN.md §3.2)."""

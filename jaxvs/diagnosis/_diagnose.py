@@ -1,0 +1,295 @@
+"""`jaxvs.diagnose`: the Python face of `jaxvs diagnose` (DESIGN.md §3.2–3.3)."""
+
+from __future__ import annotations
+
+import math
+import pathlib
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from ..data import Record, load, split_blocks
+from ._base import AbstractFamily
+from ._drive import DriveFamily
+from ._engine import search
+from ._gapmap import gap_map
+from ._report import DiagnosisReport
+from ._stats import block_length, gap_change_interval, nrmse
+from ._thermal import ThermalFamily
+from ._tmf import TMFFamily
+
+__all__ = ["FAMILIES", "diagnose"]
+
+FAMILIES: dict[str, type[AbstractFamily]] = {"drive": DriveFamily}
+FAMILIES["thermal"] = ThermalFamily
+FAMILIES["tmf"] = TMFFamily
+
+
+def _records(data: Any, role: str) -> list[tuple[Record, str]]:
+    if data is None:
+        return []
+    items = list(data) if isinstance(data, list | tuple) else [data]
+    if not items:
+        raise ValueError(f"diagnose: no {role} experiments given.")
+    out = []
+    for i, item in enumerate(items):
+        if isinstance(item, Record):
+            name = str(item.metadata.get("name") or item.metadata.get("file") or f"{role} {i + 1}")
+            out.append((item, pathlib.Path(name).name))
+        elif isinstance(item, str | pathlib.Path):
+            rec = load(item)
+            out.append((rec, pathlib.Path(item).name))
+        else:
+            raise TypeError(
+                f"diagnose: {role} experiment {i + 1} is a {type(item).__name__}; give a "
+                "jaxvs.data.Record or a path to a CSV, NPZ, MAT or HDF5 file."
+            )
+    return out
+
+
+def _check_signals(fam: AbstractFamily, recs: list[tuple[Record, str]]) -> None:
+    for rec, name in recs:
+        missing = [s for s in fam.required if s not in rec.names]
+        if missing:
+            raise ValueError(
+                f"diagnose(family={fam.name!r}): experiment {name!r} lacks the required "
+                f"signal(s) {missing}; it has {list(rec.names)}. Rename the columns to the "
+                f"canonical names {list(fam.required)} (optional: {list(fam.optional)}), e.g. "
+                "with Record.rename."
+            )
+
+
+def diagnose(
+    calibration: Any,
+    validation: Any = None,
+    *,
+    family: str,
+    holdout: float = 0.3,
+    max_effects: int = 3,
+    min_shrink: float = 0.05,
+    min_delta_bic: float = 10.0,
+    fdr: float = 0.05,
+    n_boot: int = 300,
+    seed: int = 0,
+    progress: bool = False,
+    **options: Any,
+) -> DiagnosisReport:
+    """Diagnose the sim-to-real gap of a family's nominal model on measured experiments.
+
+    Recalibrates the nominal model, measures the gap against a noise floor, maps where it
+    lies (time windows, frequency bands, operating points; block-bootstrap significance
+    with false-discovery control), then adds candidate effects from the family's library
+    greedily with Levenberg–Marquardt recalibration, accepting one only when the held-out
+    gap reduction has a bootstrap interval excluding zero and ΔBIC > `min_delta_bic`.
+
+    **Arguments:**
+
+    - `calibration`: one or several experiments: `jaxvs.data.Record`s or paths to CSV,
+        NPZ, MAT or HDF5 files with the canonical signal names of the family (DESIGN.md
+        §3.2), or the EMPS `.mat` files as they are. Several are calibrated jointly.
+    - `validation`: optional held-out experiments. Without them, the last `holdout` share
+        of the experiments (whole experiments) is held out when there are several, or the
+        last contiguous `holdout` block of a single experiment — never random samples.
+    - `family`: `"drive"`, `"tmf"` or `"thermal"`.
+    - `holdout`: share held out when `validation` is not given (default 0.3).
+    - `max_effects`: most effects added (default 3).
+    - `min_shrink`: an accepted effect must remove at least this share of the validation
+        gap (default 0.05), besides being significant.
+    - `min_delta_bic`: ΔBIC threshold (default 10, "very strong" evidence).
+    - `fdr`: false discovery rate of the gap map (default 0.05).
+    - `n_boot`: bootstrap resamples (default 300).
+    - `seed`: seed of the bootstrap and the gap-map permutations.
+    - `progress`: print progress to stderr.
+    - `**options`: family options (drive: `cutoff_hz`, `decimation`, `friction_sharpness`;
+        tmf: `order`; thermal: see the family).
+
+    **Returns:**
+
+    A [`DiagnosisReport`][]: `report.to_json()` is the content of `report.json`,
+    `report.save(folder)` writes `report.json` and `report.md`.
+    """
+    t_start = time.perf_counter()
+    if family not in FAMILIES:
+        raise ValueError(f"diagnose: unknown family {family!r}; choose one of {sorted(FAMILIES)}.")
+    if not 0 < holdout < 1:
+        raise ValueError(f"diagnose: holdout must lie in (0, 1); got {holdout}.")
+
+    def say(msg: str) -> None:
+        if progress:
+            print(f"[jaxvs diagnose {time.perf_counter() - t_start:6.1f} s] {msg}", file=sys.stderr)
+
+    fam = FAMILIES[family](**options)
+    cal_recs = _records(calibration, "calibration")
+    val_recs = _records(validation, "validation")
+    _check_signals(fam, cal_recs + val_recs)
+    if not val_recs:
+        if len(cal_recs) >= 2:
+            k = max(1, int(round(holdout * len(cal_recs))))
+            k = min(k, len(cal_recs) - 1)
+            val_recs, cal_recs = cal_recs[-k:], cal_recs[:-k]
+            how = f"last {k} experiment(s) held out"
+        else:
+            rec, name = cal_recs[0]
+            a, b = split_blocks(rec, (1 - holdout, holdout))
+            cal_recs, val_recs = (
+                [(a, f"{name} (first {1 - holdout:.0%})")],
+                [(b, f"{name} (last {holdout:.0%})")],
+            )
+            how = f"last {holdout:.0%} of the record held out as a contiguous block"
+    else:
+        how = "validation experiments given"
+    say(f"preparing {len(cal_recs)} calibration and {len(val_recs)} validation experiment(s)")
+    cal = [fam.prepare(r, n) for r, n in cal_recs]
+    val = [fam.prepare(r, n) for r, n in val_recs]
+
+    res = search(
+        fam,
+        cal,
+        val,
+        max_effects=max_effects,
+        min_shrink=min_shrink,
+        min_delta_bic=min_delta_bic,
+        n_boot=n_boot,
+        seed=seed,
+        progress=say,
+    )
+    say("mapping the gap")
+    exps = res.calibration + res.validation
+    ncal = len(res.calibration)
+    r0, r1 = res.nominal_residuals, res.final_residuals
+    y_cal = np.concatenate([e.y for e in res.calibration])
+    y_val = np.concatenate([e.y for e in res.validation])
+    gap_cal = nrmse(np.concatenate(r0[:ncal]), y_cal)
+    gap_val = nrmse(np.concatenate(r0[ncal:]), y_val)
+    noise = math.sqrt(sum(e.noise_var * e.n for e in res.validation) / float(np.sum(y_val**2)))
+
+    cells = gap_map(exps, r0, q=fdr, seed=seed)
+    cells_after = {c.label: c for c in gap_map(exps, r1, q=fdr, seed=seed)}
+    where = []
+    for c in cells:
+        if not c.significant:
+            continue
+        d = c.to_json()
+        after = cells_after.get(c.label)
+        d["gap_after"] = after.gap if after is not None else None
+        d["share_after"] = after.share if after is not None else None
+        where.append(d)
+    where = where[:12]
+    where_after = [
+        c.to_json() for c in cells_after.values() if c.significant and c.axis != "frequency"
+    ]
+    where_after.sort(key=lambda d: -(d["share"] - d["fraction"]))
+    where_after = where_after[:8]
+
+    for h, rr in zip(res.history, res.round_residuals):
+        if h["round"] == 1:
+            continue  # the nominal map is `where`
+        top = [
+            c
+            for c in gap_map(exps, rr, q=fdr, seed=seed)
+            if c.significant and c.axis != "frequency"
+        ]
+        h["where_before"] = [c.to_json() for c in top[:6]]
+    e_val0 = np.concatenate(r0[ncal:])
+    e_val1 = np.concatenate(r1[ncal:])
+    g0, g1, shrink, d_int, s_int = gap_change_interval(
+        e_val0, e_val1, y_val, length=block_length(e_val0), n_boot=n_boot, seed=seed
+    )
+    if not res.accepted:
+        g1, shrink, s_int = g0, 0.0, (0.0, 0.0)
+
+    cands = list(res.candidates.values())
+    order = {n: i for i, n in enumerate(res.accepted)}
+    cands.sort(
+        key=lambda c: (
+            0 if c.effect in order else (1 if c.testable else 2),
+            order.get(c.effect, 0),
+            -(c.delta_bic if c.delta_bic is not None else -np.inf),
+        )
+    )
+    primary = None
+    if res.accepted:
+        primary = res.accepted[0]
+        for a in res.accepted[1:]:
+            if res.candidates[a].extends == primary:
+                primary = a
+    cand_json = []
+    for c in cands:
+        cand_json.append(
+            {
+                "effect": c.effect,
+                "testable": c.testable,
+                "reason": c.reason,
+                "description": c.description,
+                "signature": c.signature,
+                "round": c.round,
+                "calibration_gap": c.calibration_gap,
+                "validation_gap": c.validation_gap,
+                "validation_gap_before": c.gap_before,
+                "shrink": c.shrink,
+                "shrink_interval": list(c.shrink_interval) if c.shrink_interval else None,
+                "reduction_interval": list(c.reduction_interval) if c.reduction_interval else None,
+                "delta_bic": c.delta_bic,
+                "accepted": c.accepted,
+                "extends": c.extends,
+                "parameters": c.parameters,
+                "seconds": c.seconds,
+            }
+        )
+    content = {
+        "family": fam.name,
+        "gap": {
+            "metric": "nrmse",
+            "calibration": gap_cal,
+            "validation": gap_val,
+            "noise_floor": noise,
+            "target": fam.target_label,
+        },
+        "where": where,
+        "where_after": where_after,
+        "candidates": cand_json,
+        "verdict": {
+            "effects": list(res.accepted),
+            "primary": primary,
+            "validation_gap": g1,
+            "calibration_gap": nrmse(np.concatenate(r1[:ncal]), y_cal),
+            "shrink": shrink,
+            "shrink_interval": list(s_int),
+            "remaining_over_noise": g1 / noise if noise > 0 else None,
+            "adequate": not res.accepted,
+            "parameters": {
+                "nominal": fam.nominal_parameters(res.final),
+                **{e.name: e.parameters() for e in res.final.effects},
+            },
+        },
+        "nominal": {
+            "model": fam.describe_nominal(),
+            "parameters": fam.nominal_parameters(res.nominal),
+        },
+        "data": {
+            "calibration": [{"name": e.name, "samples": e.n} for e in res.calibration],
+            "validation": [{"name": e.name, "samples": e.n} for e in res.validation],
+            "holdout": how,
+            "options": {k: v for k, v in fam.options.items() if isinstance(v, int | float | str)},
+        },
+        "rounds": res.history,
+        "timing": {"seconds": time.perf_counter() - t_start},
+    }
+    say(
+        "done: "
+        + (", ".join(res.accepted) if res.accepted else "no effect found (adequate up to noise)")
+    )
+    return DiagnosisReport(
+        content,
+        nominal_model=res.nominal,
+        final_model=res.final,
+        calibration=res.calibration,
+        validation=res.validation,
+        predictions={
+            "nominal": [e.y - r for e, r in zip(exps, r0)],
+            "final": [e.y - r for e, r in zip(exps, r1)],
+        },
+        cells=cells,
+    )

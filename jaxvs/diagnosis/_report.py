@@ -1,0 +1,186 @@
+"""The gap report: the content of `report.json` (DESIGN.md §3.2) and `report.md`."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import pathlib
+from typing import Any
+
+import numpy as np
+
+from ._base import Experiment, GapModel
+from ._gapmap import GapCell
+
+__all__ = ["DiagnosisReport"]
+
+
+def _clean(x: Any) -> Any:
+    """JSON-safe: NumPy scalars to Python, non-finite floats to None."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_clean(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _clean(x.tolist())
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.floating | float):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+@dataclasses.dataclass
+class DiagnosisReport:
+    """The result of `jaxvs.diagnose`: everything `report.json` holds, plus the models,
+    experiments and predictions behind it (for figures and further work).
+
+    **Fields (JSON):** `family`, `gap` (`metric`, `calibration`, `validation`,
+    `noise_floor`), `where` (significant gap-map cells, most concentrated first),
+    `candidates` (best first), `verdict` (`effects` in the order added, `primary`,
+    `validation_gap`, `shrink`, `shrink_interval`, `adequate`), `nominal`, `data`,
+    `rounds`, `timing`. See `to_json()`.
+
+    **Fields (Python only):** `nominal_model`, `final_model` (`GapModel`s),
+    `calibration`, `validation` (`Experiment`s), `predictions` (per experiment, nominal
+    and final), `cells` (the whole gap map), `cells_after`.
+    """
+
+    content: dict[str, Any]
+    nominal_model: GapModel | None = None
+    final_model: GapModel | None = None
+    calibration: list[Experiment] = dataclasses.field(default_factory=list)
+    validation: list[Experiment] = dataclasses.field(default_factory=list)
+    predictions: dict[str, list[np.ndarray]] = dataclasses.field(default_factory=dict)
+    cells: list[GapCell] = dataclasses.field(default_factory=list)
+
+    # convenient access
+    def __getitem__(self, key: str) -> Any:
+        return self.content[key]
+
+    @property
+    def family(self) -> str:
+        return self.content["family"]
+
+    @property
+    def gap(self) -> dict[str, Any]:
+        return self.content["gap"]
+
+    @property
+    def where(self) -> list[dict[str, Any]]:
+        return self.content["where"]
+
+    @property
+    def candidates(self) -> list[dict[str, Any]]:
+        return self.content["candidates"]
+
+    @property
+    def verdict(self) -> dict[str, Any]:
+        return self.content["verdict"]
+
+    def to_json(self) -> dict[str, Any]:
+        """The report as a JSON-ready dictionary (the schema of DESIGN.md §3.2)."""
+        return _clean(self.content)
+
+    def to_markdown(self) -> str:
+        c = self.content
+        g = c["gap"]
+        v = c["verdict"]
+        pct = lambda x: "—" if x is None else f"{100 * x:.2f} %"
+        lines = [
+            f"# Sim-to-real gap diagnosis — family `{c['family']}`",
+            "",
+            f"Nominal model: {c['nominal']['model']}.",
+            "",
+            "## Verdict",
+            "",
+        ]
+        if v["effects"]:
+            lines.append(
+                f"Missing effect(s), in the order added: **{', '.join(v['effects'])}**. "
+                f"Validation gap {pct(g['validation'])} → {pct(v['validation_gap'])} "
+                f"(shrink {v['shrink']:.2f}, 95 % interval "
+                f"[{v['shrink_interval'][0]:.2f}, {v['shrink_interval'][1]:.2f}]); "
+                f"noise floor {pct(g['noise_floor'])}."
+            )
+        else:
+            lines.append(
+                "No candidate effect passed (held-out gap reduction with a bootstrap interval "
+                "excluding zero, ΔBIC > 10): the nominal model is adequate up to the noise "
+                f"and the effects tested. Validation gap {pct(g['validation'])}, noise floor "
+                f"{pct(g['noise_floor'])}."
+            )
+        lines += [
+            "",
+            "## Gap (metric: normalised RMS error of the target)",
+            "",
+            "| data | nominal | final |",
+            "|---|---|---|",
+            f"| calibration | {pct(g['calibration'])} | {pct(v.get('calibration_gap'))} |",
+            f"| validation | {pct(g['validation'])} | {pct(v['validation_gap'])} |",
+            f"| noise floor | {pct(g['noise_floor'])} | |",
+            "",
+            "## Where the gap lies (significant cells, FDR 5 %)",
+            "",
+            "| axis | cell | share of gap | share of samples | gap before | gap after |",
+            "|---|---|---|---|---|---|",
+        ]
+        for w in c["where"]:
+            lines.append(
+                f"| {w['axis']} | {w['label']} | {w['share']:.2f} | {w['fraction']:.2f} | "
+                f"{pct(w.get('gap'))} | {pct(w.get('gap_after'))} |"
+            )
+        if not c["where"]:
+            lines.append("| — | no cell concentrates the gap significantly | | | | |")
+        if c.get("where_after"):
+            lines += [
+                "",
+                "## Where the remaining gap lies (final model, significant cells)",
+                "",
+                "| axis | cell | share of gap | share of samples | gap |",
+                "|---|---|---|---|---|",
+            ]
+            for w in c["where_after"]:
+                lines.append(
+                    f"| {w['axis']} | {w['label']} | {w['share']:.2f} | {w['fraction']:.2f} | "
+                    f"{pct(w.get('gap'))} |"
+                )
+        lines += [
+            "",
+            "## Candidate effects (best first)",
+            "",
+            "| effect | testable | signature | validation gap | shrink [95 % CI] | ΔBIC | accepted | parameters |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for k in c["candidates"]:
+            if not k["testable"]:
+                lines.append(f"| {k['effect']} | no: {k['reason']} | | | | | no | |")
+                continue
+            ci = k.get("shrink_interval")
+            shr = (
+                f"{k['shrink']:.2f} [{ci[0]:.2f}, {ci[1]:.2f}]"
+                if k.get("shrink") is not None and ci
+                else "—"
+            )
+            par = ", ".join(f"{n} = {val:.4g}" for n, val in (k.get("parameters") or {}).items())
+            dbic = "—" if k.get("delta_bic") is None else f"{k['delta_bic']:.1f}"
+            lines.append(
+                f"| {k['effect']} | yes | {k['signature']:.3f} | {pct(k.get('validation_gap'))} | "
+                f"{shr} | {dbic} | {'**yes**' if k['accepted'] else 'no'} | {par} |"
+            )
+        lines += ["", f"Run time: {c['timing']['seconds']:.1f} s.", ""]
+        if c.get("figures"):
+            lines += ["## Figures", ""] + [f"![{f}]({f})" for f in c["figures"]] + [""]
+        return "\n".join(lines)
+
+    def save(self, out: str | pathlib.Path) -> pathlib.Path:
+        """Write `report.json` and `report.md` to the folder `out` (created)."""
+        out = pathlib.Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "report.json").write_text(json.dumps(self.to_json(), indent=2) + "\n")
+        (out / "report.md").write_text(self.to_markdown())
+        return out

@@ -1,0 +1,404 @@
+"""The `thermal` family: the study's static regression of the bearing temperature and its
+candidate effects.
+
+Nominal model (Dementjev et al. 2014, eq. 2-3): the inner bearing temperature is a static
+linear regression on bias-free inputs,
+
+    T_bearing = c0 + c1·(T_chassis − T_chassis,min) + c2·(v_m − v_m,min),
+
+the speed term only when the motor speed `v_m` is recorded. The biases (each input's
+minimum) are taken from the calibration experiments and stored in the model as constants,
+so validation data are shifted by the same amounts. The temperature inputs are smoothed by
+a zero-phase low-pass (option `smoothing_s`, default 60 s) before they enter any model: the
+chassis moves with a time constant of tens of minutes, so the filter changes nothing
+systematic, but it removes the sensor noise of the inputs, which a lag would otherwise
+"explain" by averaging it out (errors in the variables).
+
+Each candidate effect is a differentiable augmentation that equals the nominal model when
+its size (or its time constant) is zero:
+
+| effect | augmentation of the predicted `T_bearing` [°C] |
+|---|---|
+| `dynamics` | the prediction passed through a first-order lag of time constant `τ` (heat capacity of the inner ring): exact discretisation for inputs linear between samples |
+| `ambient_temperature` | `+ c_a·(T_air − T_air,min)` |
+| `coolant_temperature` | `+ c_w·(T_water − T_water,min)` |
+| `speed_nonlinearity` | `+ c_n·(|v_m| / v_max)^α`: friction heat growing faster than linearly with speed (Palmgren: `α ≈ 1.3-2`) |
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.signal as ss
+from jaxtyping import Array, Float
+
+from ..calibration import positive
+from ..data import Record
+from ._base import AbstractEffect, AbstractFamily, Context, EffectSpec, Experiment
+
+__all__ = ["StaticRegression", "ThermalFamily"]
+
+_INPUTS = ("T_chassis", "v_m", "T_air", "T_water")
+
+
+def _f(x) -> float:
+    return float(np.asarray(x).reshape(-1)[0])
+
+
+class StaticRegression(eqx.Module):
+    """The study's static regression on bias-free inputs (eq. 2-3), `T_bearing` [°C].
+
+    **Fields:** `coef` = `(c0 [°C], c1 [-], c2 [K/rpm])` (or `(c0, c1)` without speed);
+    `bias_chassis` [°C] and `bias_speed` [rpm] (`None`: no speed term) are constants.
+    """
+
+    coef: Float[Array, " k"]
+    bias_chassis: float = eqx.field(static=True)
+    bias_speed: float | None = eqx.field(static=True, default=None)
+
+    def __call__(self, d: Mapping[str, Array]) -> Float[Array, " n"]:
+        y = self.coef[0] + self.coef[1] * (d["T_chassis"] - self.bias_chassis)
+        if self.bias_speed is not None:
+            y = y + self.coef[2] * (d["v_m"] - self.bias_speed)
+        return y
+
+    def parameters(self) -> dict[str, float]:
+        c = np.asarray(self.coef)
+        out = {"c0": float(c[0]), "c_chassis": float(c[1]), "bias_chassis": self.bias_chassis}
+        if self.bias_speed is not None:
+            out["c_speed"] = float(c[2])
+            out["bias_speed"] = self.bias_speed
+        return out
+
+
+# ------------------------------------------------------------------------------ effects
+
+
+def first_order_lag(
+    s: Float[Array, " n"], tau: Float[Array, ""], dt: float, y_init: Float[Array, ""] | None = None
+) -> Float[Array, " n"]:
+    """First-order lag `τ ẏ + y = s` of a sampled signal.
+
+    Exact discretisation for `s` linear between samples (first-order hold):
+    `y_k = a y_{k−1} + (1 − a) s_{k−1} + (1 − b)(s_k − s_{k−1})`, `a = e^{−dt/τ}`,
+    `b = (τ/dt)(1 − a)` (the ramp response of a first-order system). The state one sample
+    before the first is `y_init` (default: `s₀`, equilibrium), with the input constant over
+    that sample, so `y₀ = a·y_init + (1 − a)·s₀`. For `τ = 0` this is `y = s` exactly; as
+    `τ → 0` it tends to it continuously (`y_k ≈ s_k − (τ/dt)(s_k − s_{k−1})`).
+
+    **Arguments:** `s` [any unit], `tau` [s] (≥ 0), `dt` [s], `y_init` [unit of `s`].
+    **Returns:** `y`, same unit.
+    """
+    pos = tau > 0
+    tau_safe = jnp.where(pos, tau, 1.0)
+    r = dt / tau_safe
+    a = jnp.where(pos, jnp.exp(-r), 0.0)
+    b = jnp.where(pos, -jnp.expm1(-r) / r, 0.0)
+    ds = jnp.diff(s, prepend=s[:1])
+
+    def step(y_prev, x):
+        sk, dsk = x
+        y = a * y_prev + (1.0 - a) * (sk - dsk) + (1.0 - b) * dsk
+        return y, y
+
+    y0 = s[0] if y_init is None else y_init
+    _, y = jax.lax.scan(step, y0, (s, ds))
+    return jnp.where(pos, y, s)
+
+
+class Dynamics(AbstractEffect):
+    """The bearing temperature lags its static value with a time constant `tau` [s]."""
+
+    name: ClassVar[str] = "dynamics"
+    tau: Any  # [s], > 0 when calibrated (log-parametrised); 0 is the nominal model
+    dt: float = eqx.field(static=True)
+
+    def apply(self, y, d, nominal):
+        # The initial state of the bearing is unknown (a machine rarely starts in
+        # equilibrium); it is taken from the measured target at the first sample.
+        return first_order_lag(y, jnp.asarray(self.tau), self.dt, d["y"][0])
+
+    def order(self) -> int:
+        return 1
+
+    def constrained(self):
+        return eqx.tree_at(lambda e: e.tau, self, replace_fn=positive)
+
+    def parameters(self):
+        return {"tau_s": _f(self.tau)}
+
+
+class AmbientTemperature(AbstractEffect):
+    """`+ c·(T_air − bias)`: the air temperature reaches the bearing through the shaft."""
+
+    name: ClassVar[str] = "ambient_temperature"
+    size: Float[Array, 1]  # [-]
+    bias: float = eqx.field(static=True)
+
+    def contribution(self, d, nominal):
+        return self.size[0] * (d["T_air"] - self.bias)
+
+    def parameters(self):
+        return {"c_air": _f(self.size[0]), "bias_air": self.bias}
+
+
+class CoolantTemperature(AbstractEffect):
+    """`+ c·(T_water − bias)`: the cooling water reaches the bearing through its jacket."""
+
+    name: ClassVar[str] = "coolant_temperature"
+    size: Float[Array, 1]  # [-]
+    bias: float = eqx.field(static=True)
+
+    def contribution(self, d, nominal):
+        return self.size[0] * (d["T_water"] - self.bias)
+
+    def parameters(self):
+        return {"c_water": _f(self.size[0]), "bias_water": self.bias}
+
+
+class SpeedNonlinearity(AbstractEffect):
+    """`+ c·(|v_m| / v_max)^α`: friction heat that grows faster than linearly with speed."""
+
+    name: ClassVar[str] = "speed_nonlinearity"
+    size: Float[Array, 1]  # [K]
+    alpha: Any  # exponent [-], positive
+    scale: float = eqx.field(static=True)  # v_max [rpm] of the calibration data
+
+    def contribution(self, d, nominal):
+        x = jnp.abs(d["v_m"]) / self.scale
+        safe = jnp.where(x > 0, x, 1.0)
+        return self.size[0] * jnp.where(x > 0, jnp.exp(self.alpha * jnp.log(safe)), 0.0)
+
+    def constrained(self):
+        return eqx.tree_at(lambda e: e.alpha, self, replace_fn=positive)
+
+    def parameters(self):
+        return {"c_nonlinear": _f(self.size[0]), "alpha": _f(self.alpha), "v_max": self.scale}
+
+
+# ------------------------------------------------------------------------------ templates
+
+
+def _min_of(ctx: Context, key: str) -> float:
+    return min(float(np.min(e.arrays[key])) for e in ctx.experiments)
+
+
+def _t_dynamics(ctx: Context) -> list[AbstractEffect]:
+    dt = ctx.experiments[0].dt
+    # heuristic: time constants from a few samples up to hours, one per decade-ish
+    taus = [t for t in (4.0 * dt, 150.0, 900.0, 3600.0) if t >= 2.0 * dt]
+    taus = sorted(set(taus))[:4]
+    return [Dynamics(jnp.asarray(t), dt) for t in taus]
+
+
+def _t_ambient(ctx: Context) -> list[AbstractEffect]:
+    return [AmbientTemperature(jnp.zeros(1), _min_of(ctx, "T_air"))]
+
+
+def _t_coolant(ctx: Context) -> list[AbstractEffect]:
+    return [CoolantTemperature(jnp.zeros(1), _min_of(ctx, "T_water"))]
+
+
+def _t_speed(ctx: Context) -> list[AbstractEffect]:
+    vmax = max(float(np.max(np.abs(e.arrays["v_m"]))) for e in ctx.experiments)
+    return [SpeedNonlinearity(jnp.zeros(1), jnp.asarray(a), vmax) for a in (1.5, 2.0, 3.0)]
+
+
+def _varies(key: str, what: str):
+    def check(experiments: Sequence[Experiment]) -> str | None:
+        x = np.concatenate([np.asarray(e.arrays[key]) for e in experiments])
+        if float(np.ptp(x)) <= 0:
+            return f"needs {what}; {key} is constant"
+        return None
+
+    return check
+
+
+def _needs_speed_levels(experiments: Sequence[Experiment]) -> str | None:
+    v = np.concatenate([np.abs(np.asarray(e.arrays["v_m"])) for e in experiments])
+    vmax = float(np.max(v)) if v.size else 0.0
+    if vmax <= 0:
+        return "needs the spindle turning; v_m is zero throughout"
+    levels = np.unique(np.round(v[v > 0.01 * vmax] / (0.02 * vmax)))
+    if levels.size < 3:
+        return (
+            "needs at least three distinct speeds to separate a nonlinearity from the linear term"
+        )
+    return None
+
+
+# ------------------------------------------------------------------------------ family
+
+
+def _noise_sigma(y: np.ndarray) -> float:
+    """White-noise level of a sampled temperature from its second differences:
+    `Δ²y = Δ²s + Δ²e` with `var(Δ²e) = 6σ²`; a smooth signal (and a linear drift)
+    leaves nothing in `Δ²s`, and the median absolute deviation ignores the few steps at
+    speed changes."""
+    d2 = np.diff(np.asarray(y, float), 2)
+    if d2.size < 8:
+        return 0.0
+    mad = float(np.median(np.abs(d2 - np.median(d2))))
+    return 1.4826 * mad / math.sqrt(6.0)
+
+
+class ThermalFamily(AbstractFamily):
+    """Inner bearing temperature of a motor spindle from chassis temperature and speed.
+
+    **Options:** `smoothing_s` (zero-phase low-pass of the temperature inputs: cut-off
+    period in seconds, default 60; 0 switches it off; skipped when the sampling is
+    coarser than a quarter of it), `speed_change_s` (length of the "after a speed change"
+    cell of the gap map, default 3600 s).
+    """
+
+    name = "thermal"
+    required = ("T_chassis", "T_bearing")
+    optional = ("v_m", "T_air", "T_water")
+    target_label = "bearing temperature T_bearing [°C]"
+
+    def __init__(self, **options: Any):
+        super().__init__(**options)
+        self._absent: set[str] = set()
+
+    def prepare(self, record: Record, name: str) -> Experiment:
+        n = len(record)
+        if n < 16:
+            raise ValueError(
+                f"diagnose(thermal): experiment {name!r} has {n} samples; at least 16 are "
+                "needed (the study samples every 5 s over hours). Give longer records."
+            )
+        dt = float(record.dt)
+        smoothing = float(self.options.get("smoothing_s", 60.0))
+        if smoothing < 0:
+            raise ValueError(
+                f"diagnose(thermal): smoothing_s must be >= 0 [s] (0: no smoothing); got {smoothing}."
+            )
+        arrays: dict[str, np.ndarray] = {}
+        for key in _INPUTS:
+            if key not in record.names:
+                self._absent.add(key)
+                arrays[key] = np.zeros(n)
+                continue
+            x = np.asarray(record[key], float)
+            if key != "v_m" and smoothing > 4 * dt and n > 40:
+                sos = ss.butter(2, 1.0 / smoothing, fs=1.0 / dt, output="sos")
+                x = ss.sosfiltfilt(sos, x, padlen=min(n - 1, int(3 * smoothing / dt)))
+            arrays[key] = x
+        y = np.asarray(record["T_bearing"], float)
+        arrays["y"] = y
+        sigma = _noise_sigma(y)
+        ops: dict[str, np.ndarray] = {"T_chassis [°C]": arrays["T_chassis"]}
+        masks: dict[str, np.ndarray] = {}
+        if "T_air" in record.names:
+            ops["T_air [°C]"] = arrays["T_air"]
+        if "v_m" in record.names:
+            v = np.abs(arrays["v_m"])
+            ops["speed [rpm]"] = v
+            masks.update(self._speed_masks(v, dt))
+        return Experiment(
+            name=name,
+            t=np.asarray(record.t),
+            arrays=arrays,
+            ops=ops,
+            masks=masks,
+            noise_var=sigma**2,
+            signals=frozenset(record.names),
+            source=record,
+        )
+
+    def _speed_masks(self, v: np.ndarray, dt: float) -> dict[str, np.ndarray]:
+        vmax = float(np.max(v))
+        if vmax <= 0:
+            return {}
+        masks = {}
+        still = v < 0.01 * vmax
+        if 0 < still.sum() < v.size:
+            masks["standstill"] = still
+        change = np.flatnonzero(np.abs(np.diff(v)) > 0.05 * vmax) + 1
+        if change.size:
+            w = max(1, int(round(float(self.options.get("speed_change_s", 3600.0)) / dt)))
+            after = np.zeros(v.size, bool)
+            for c in change:
+                after[c : c + w] = True
+            if 0 < after.sum() < v.size:
+                masks["after a speed change"] = after
+                masks["steady speed"] = ~after
+        levels = np.unique(np.round(v / max(0.01 * vmax, 1e-12)) * 0.01 * vmax)
+        if 2 <= levels.size <= 8:
+            for lev in levels:
+                m = np.abs(v - lev) <= 0.005 * vmax
+                if 0 < m.sum() < v.size:
+                    masks[f"speed level {lev:.0f} rpm"] = m
+        return masks
+
+    def describe_nominal(self) -> str:
+        return (
+            "static linear regression on bias-free inputs, T_bearing = c0 + c1·(T_chassis − min)"
+            + ("" if "v_m" in self._absent else " + c2·(v_m − min)")
+            + " (study eq. 2-3)"
+        )
+
+    def nominal(self, experiments: Sequence[Experiment]) -> StaticRegression:
+        tc = np.concatenate([e.arrays["T_chassis"] for e in experiments])
+        if float(np.ptp(tc)) <= 0:
+            raise ValueError(
+                "diagnose(thermal): T_chassis is constant over the calibration data; the "
+                "regression coefficient is not identifiable. Give experiments in which the "
+                "spindle warms up or cools down."
+            )
+        use_speed = "v_m" not in self._absent
+        bias_c = float(tc.min())
+        cols = [np.ones(tc.size), tc - bias_c]
+        bias_v = None
+        if use_speed:
+            v = np.concatenate([e.arrays["v_m"] for e in experiments])
+            bias_v = float(v.min())
+            if float(np.ptp(v)) > 0:
+                cols.append(v - bias_v)
+            else:
+                use_speed, bias_v = False, None
+        phi = np.stack(cols, -1)
+        y = np.concatenate([e.y for e in experiments])
+        th, *_ = np.linalg.lstsq(phi, y, rcond=None)
+        return StaticRegression(jnp.asarray(th), bias_c, bias_v)
+
+    def library(self) -> list[EffectSpec]:
+        return [
+            EffectSpec(
+                "dynamics",
+                ("T_chassis", "T_bearing"),
+                _t_dynamics,
+                signature="residual against the rate of change of the prediction",
+                description="the bearing lags its static temperature (heat capacity)",
+            ),
+            EffectSpec(
+                "ambient_temperature",
+                ("T_air",),
+                _t_ambient,
+                testable=_varies("T_air", "a varying air temperature"),
+                signature="T_air",
+                description="air temperature acting on the bearing directly",
+            ),
+            EffectSpec(
+                "coolant_temperature",
+                ("T_water",),
+                _t_coolant,
+                testable=_varies("T_water", "a varying water temperature"),
+                signature="T_water",
+                description="cooling-water temperature acting on the bearing directly",
+            ),
+            EffectSpec(
+                "speed_nonlinearity",
+                ("v_m",),
+                _t_speed,
+                testable=_needs_speed_levels,
+                signature="(|v_m| / v_max)^α",
+                description="friction heat growing faster than linearly with speed",
+            ),
+        ]

@@ -1,0 +1,600 @@
+"""The `tmf` family: one position-independent transmissibility from the encoder to the tool
+centre point, and its candidate effects.
+
+Nominal model (the TMF study, Doerrer et al. 2022, eq. 8): the tool-side motion is the
+encoder-side motion through one rational TMF of equal numerator and denominator order
+`order` (option, default 4),
+
+    x_t = T(s) x_e,   T(s) = B(s) / A(s),   A(s) = Π_k (s² + 2 ζ_k ω_k s + ω_k²) [· (s + p)],
+
+simulated from rest with the zero-order-hold discretisation (`jaxvs.simulate(...,
+method="zoh")`). The denominator is stored as second-order sections with `log ω`, `log ζ`
+(and `log p` for an odd order), so every iterate of the calibration is stable; all
+coefficients live in the frequency scale `s / w0` for conditioning. The model is initialised
+by `jaxvs.fit_rational` on the H1 transmissibility estimate over the band where the
+coherence is high. Each experiment is taken relative to its first sample (the machine is
+assumed at rest there).
+
+Each candidate effect is a differentiable augmentation that equals the nominal model when
+its size (or delay) is zero:
+
+| effect | augmentation of the predicted `x_t` |
+|---|---|
+| `position_dependence` | every TMF parameter linear in `(y − ȳ)`: `θ(y) = θ₀ + (y − ȳ)/h · Δθ`, `size = Δθ` |
+| `missing_mode` | `+ (r₁ ω s + r₀ ω²) / (s² + 2ζωs + ω²) · x_e`, a mode in parallel, `size = (r₀, r₁)`; `ω` seeded at the residual-spectrum peaks |
+| `sensor_delay` | the prediction delayed by `τ` (`x_t` recorded late), fractional by Lanczos interpolation |
+| `process_force` | `+ g · N(s) / A(s) · f`: the compliance between the measured process force and the TCP relative to the encoder, with the structure's own poles `A(s)` (those of the nominal TMF) and a free numerator, `size = N` |
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.signal as ss
+from jaxtyping import Array, Float
+
+from ..calibration import fit_rational, positive
+from ..data import Record
+from ..models import RationalTF
+from ..signal import transmissibility
+from ._base import AbstractEffect, AbstractFamily, Context, EffectSpec, Experiment
+
+__all__ = ["StableTMF", "TMFFamily"]
+
+
+def _f(x) -> float:
+    return float(np.asarray(x).reshape(-1)[0])
+
+
+def _polymul(a: Array, b: Array) -> Array:
+    n, m = a.shape[-1], b.shape[-1]
+    out = jnp.zeros((n + m - 1,), jnp.result_type(a, b))
+    for j in range(m):
+        out = out.at[j : j + n].add(a * b[j])
+    return out
+
+
+def _sections_from_poles(poles: np.ndarray) -> tuple[list[float], list[float], list[float]]:
+    """Pair stable poles into (ω, ζ) sections plus at most one real pole (all > 0)."""
+    tol = 1e-9 * max(1.0, float(np.max(np.abs(poles))))
+    upper = sorted((p for p in poles if p.imag > tol), key=abs)
+    real = sorted(float(p.real) for p in poles if abs(p.imag) <= tol)
+    omegas, zetas = [abs(p) for p in upper], [-p.real / abs(p) for p in upper]
+    while len(real) >= 2:
+        a, b = -real.pop(0), -real.pop(0)
+        omegas.append(math.sqrt(a * b))
+        zetas.append((a + b) / (2 * math.sqrt(a * b)))
+    return omegas, zetas, [-r for r in real]
+
+
+def section_poles(omega: Array, zeta: Array, real: Array) -> Array:
+    """The roots of `Π (s² + 2ζωs + ω²) · Π (s + p)`: `ω(−ζ ± √(ζ² − 1))` and `−p`.
+
+    Both roots of each section are returned (a conjugate pair, or two real roots when
+    `ζ > 1`); a double root at `ζ = 1` is split by 1e-10 so that residues stay finite.
+    """
+    cdt = jnp.result_type(omega.dtype, jnp.complex64)
+    disc = zeta**2 - 1.0
+    disc = jnp.where(jnp.abs(disc) < 1e-10, -1e-10, disc)
+    root = jnp.sqrt(disc.astype(cdt))
+    upper = omega * (-zeta + root)
+    lower = omega * (-zeta - root)
+    return jnp.concatenate([upper, lower, (-real).astype(cdt)])
+
+
+def partial_fractions(num: Array, poles: Array) -> tuple[Array, Array]:
+    """`B(s) / Π(s − p_i) = d + Σ r_i / (s − p_i)` for distinct poles and
+    `len(num) <= len(poles) + 1` (highest power first): `d` and the residues
+    `r_i = B(p_i) / Π_{j≠i}(p_i − p_j)` (the remainder `B − d·A` vanishes at every pole
+    like `B` does up to `d·A(p_i) = 0`)."""
+    n = poles.shape[0]
+    num = jnp.concatenate([jnp.zeros((n + 1 - num.shape[0],), num.dtype), num])
+    d = num[0]
+    diff = poles[:, None] - poles[None, :]
+    diff = jnp.where(jnp.eye(n, dtype=bool), 1.0, diff)
+    res = jnp.polyval(num.astype(poles.dtype), poles) / jnp.prod(diff, axis=1)
+    return d, res
+
+
+def simulate_modal(
+    d: Array, residues: Array, poles: Array, u: Float[Array, " n"], dt: float
+) -> Float[Array, " n"]:
+    """Zero-order-hold response from rest of `d + Σ r_i / (s − p_i)` (poles [rad/s]).
+
+    Each first-order mode is discretised exactly, `x_{k+1} = e^{p dt} x_k + (e^{p dt} − 1)/p
+    u_k` (the input held over each sample), and `y_k = d u_k + Re Σ r_i x_{i,k}`: the
+    modal form of `jaxvs.simulate(..., method="zoh")`, as one `lax.scan` over time with
+    closed-form poles. (Measured: for forward-mode Jacobians of a few thousand samples this
+    plain scan beats an FFT convolution, an associative scan and a blocked scan on CPU.)
+    """
+    lam = jnp.exp(poles * dt)
+    gam = jnp.expm1(poles * dt) / poles
+
+    def step(x, uk):
+        return lam * x + gam * uk, jnp.real(jnp.sum(residues * x))
+
+    _, y = jax.lax.scan(step, jnp.zeros(poles.shape, poles.dtype), u)
+    return d * u + y
+
+
+class StableTMF(eqx.Module):
+    """A rational TMF of equal orders with an always-stable denominator, `x_t = T(s) x_e`.
+
+    `T(s) = B(σ) / A(σ)`, `σ = s / w0`, `A(σ) = Π (σ² + 2ζ_k ω_k σ + ω_k²) (σ + p)`, with
+    `ω_k = exp(log_omega_k)`, `ζ_k = exp(log_zeta_k)`, `p = exp(log_pole)` (odd order
+    only), all in units of `w0` [rad/s]. Simulated with the zero-order hold from rest
+    (exact discretisation of the modal form, see [`simulate_modal`][]).
+
+    **Fields:** `num` `(order + 1,)` numerator of `B(σ)`, highest power first;
+    `log_omega`, `log_zeta` `(order // 2,)`; `log_pole` `(order % 2,)`; `w0` [rad/s]
+    and `dt` [s] are constants.
+    """
+
+    num: Float[Array, " n1"]
+    log_omega: Float[Array, " sec"]
+    log_zeta: Float[Array, " sec"]
+    log_pole: Float[Array, " odd"]
+    w0: float = eqx.field(static=True)
+    dt: float = eqx.field(static=True)
+
+    @property
+    def order(self) -> int:
+        return self.num.shape[-1] - 1
+
+    def flat(self) -> Float[Array, " p"]:
+        return jnp.concatenate([self.num, self.log_omega, self.log_zeta, self.log_pole])
+
+    def _split(self, delta: Array | None):
+        th = self.flat() if delta is None else self.flat() + delta
+        n1, ns, no = self.num.shape[0], self.log_omega.shape[0], self.log_pole.shape[0]
+        return (
+            th[:n1],
+            th[n1 : n1 + ns],
+            th[n1 + ns : n1 + 2 * ns],
+            th[n1 + 2 * ns : n1 + 2 * ns + no],
+        )
+
+    def scaled_poles(self, delta: Array | None = None) -> Array:
+        """Poles in units of `w0` (roots of `A(σ)`)."""
+        _, lw, lz, lp = self._split(delta)
+        return section_poles(jnp.exp(lw), jnp.exp(lz), jnp.exp(lp))
+
+    def simulate(
+        self, u: Float[Array, " n"], delta: Array | None = None, num: Array | None = None
+    ) -> Float[Array, " n"]:
+        """Response to `u` of `B(σ)/A(σ)` (or of `num(σ)/A(σ)`), parameters `flat() + delta`."""
+        b, _, _, _ = self._split(delta)
+        b = b if num is None else num
+        p = self.scaled_poles(delta)
+        d, r = partial_fractions(b, p)
+        return simulate_modal(d, r * self.w0, p * self.w0, u, self.dt)
+
+    def __call__(self, d: Mapping[str, Array]) -> Float[Array, " n"]:
+        return self.simulate(d["x_e"])
+
+    def tf(self) -> RationalTF:
+        """The TMF as a `RationalTF` in physical coefficients (concrete use)."""
+        num, lw, lz, lp = (np.asarray(x) for x in self._split(None))
+        den = np.ones(1)
+        for w, z in zip(np.exp(lw), np.exp(lz)):
+            den = np.polymul(den, [1.0, 2 * z * w, w * w])
+        for p in np.exp(lp):
+            den = np.polymul(den, [1.0, p])
+        powers = self.w0 ** np.arange(0, self.order + 1, dtype=float)
+        # Σ c_i σ^(n−i) with σ = s/w0, times w0^n: the coefficient of s^(n−i) is c_i w0^i
+        return RationalTF(num * powers, den * powers)
+
+    def parameters(self) -> dict[str, float]:
+        out = {}
+        w = np.exp(np.asarray(self.log_omega)) * self.w0
+        z = np.exp(np.asarray(self.log_zeta))
+        for i, k in enumerate(np.argsort(w)):
+            out[f"f_{i + 1}_hz"] = float(w[k] / (2 * math.pi))
+            out[f"zeta_{i + 1}"] = float(z[k])
+        for k, p in enumerate(np.exp(np.asarray(self.log_pole)) * self.w0):
+            out[f"real_pole_{k + 1}_rad_s"] = float(p)
+        tf = self.tf()
+        out["static_gain"] = float(np.asarray(tf.num)[-1] / np.asarray(tf.den)[-1])
+        return out
+
+    @classmethod
+    def from_rational(cls, tf: RationalTF, w0: float, dt: float) -> StableTMF:
+        """From a stable `RationalTF` of equal orders (concrete, outside `jit`); poles on
+        or right of the imaginary axis are reflected into the left half-plane."""
+        num = np.asarray(tf.num, float)
+        den = np.asarray(tf.den, float)
+        n = den.size - 1
+        num = np.concatenate([np.zeros(n + 1 - num.size), num])
+        poles = np.roots(den)
+        poles = np.where(poles.real >= 0, -np.abs(poles.real) - 1e-3 * w0 + 1j * poles.imag, poles)
+        omegas, zetas, reals = _sections_from_poles(poles / w0)
+        powers = w0 ** np.arange(0, n + 1, dtype=float)
+        num_s = num / den[0] / powers
+        return cls(
+            jnp.asarray(num_s),
+            jnp.log(jnp.asarray(omegas, float)),
+            jnp.log(jnp.asarray(zetas, float)),
+            jnp.log(jnp.asarray(reals, float)),
+            float(w0),
+            float(dt),
+        )
+
+
+# ------------------------------------------------------------------------------ effects
+
+
+class PositionDependence(AbstractEffect):
+    """Every TMF parameter linear in the other axis' position: `θ(y) = θ₀ + x·Δθ`,
+    `x = (y − ȳ)/h` with `ȳ`, `h` the centre and half-range of the calibration positions."""
+
+    name: ClassVar[str] = "position_dependence"
+    size: Float[Array, " p"]  # Δθ per half-range, for (num, log ω, log ζ, log p)
+    centre: float = eqx.field(static=True)
+    half_range: float = eqx.field(static=True)
+
+    def contribution(self, d, nominal):
+        x = (d["pos_y"][0] - self.centre) / self.half_range
+        return nominal.simulate(d["x_e"], x * self.size) - nominal(d)
+
+    def parameters(self):
+        s = np.asarray(self.size)
+        return {
+            "y_centre": self.centre,
+            "y_half_range": self.half_range,
+            "max_relative_change": float(np.max(np.abs(s))),
+        }
+
+
+class MissingMode(AbstractEffect):
+    """A mode in parallel on `x_e`: `(r₁ ω s + r₀ ω²) / (s² + 2ζωs + ω²)`."""
+
+    name: ClassVar[str] = "missing_mode"
+    size: Float[Array, 2]  # residue (r0, r1) [-]
+    omega: Any  # [rad/s], positive
+    zeta: Any  # [-], positive
+    dt: float = eqx.field(static=True)
+
+    def contribution(self, d, nominal):
+        w, z = jnp.reshape(self.omega, (1,)), jnp.reshape(self.zeta, (1,))
+        p = section_poles(w, z, jnp.zeros((0,), w.dtype))
+        _, r = partial_fractions(jnp.stack([self.size[1] * w[0], self.size[0] * w[0] ** 2]), p)
+        return simulate_modal(jnp.zeros((), w.dtype), r, p, d["x_e"], self.dt)
+
+    def constrained(self):
+        return eqx.tree_at(lambda e: (e.omega, e.zeta), self, replace_fn=positive)
+
+    def parameters(self):
+        s = np.asarray(self.size)
+        return {
+            "f_hz": _f(self.omega) / (2 * math.pi),
+            "zeta": _f(self.zeta),
+            "residue_static": float(s[0]),
+            "residue_velocity": float(s[1]),
+        }
+
+
+def lanczos_delay(
+    y: Float[Array, " n"], delay: Float[Array, ""], a: int = 8, max_shift: int = 256
+) -> Float[Array, " n"]:
+    """`y` delayed by `delay` samples (any real number), by Lanczos interpolation.
+
+    `y_d[k] = Σ_j L(p − j) y[j]`, `p = k − delay`, over the `2a` samples around `p`, with
+    the kernel `L(x) = sinc(x) sinc(x/a)` normalised to unit sum; samples before the
+    start or after the end repeat the first or last one, and shifts beyond `max_shift`
+    samples saturate. Exactly `y` at zero delay. Each tap is one contiguous dynamic slice
+    of the padded signal (no gather).
+    """
+    n = y.shape[0]
+    m = jnp.floor(delay)
+    u = 1.0 - (delay - m)  # p = (k − m − 1) + u, u in (0, 1]
+    pad = max_shift + a
+    ypad = jnp.concatenate([jnp.full((pad,), y[0]), y, jnp.full((pad,), y[-1])])
+    shift = jnp.clip(m.astype(jnp.int32), -max_shift, max_shift)
+    out = jnp.zeros_like(y)
+    wsum = 0.0
+    for j in range(-a + 1, a + 1):
+        x = j - u
+        w = jnp.sinc(x) * jnp.sinc(x / a)
+        start = pad - shift - 1 + j
+        out = out + w * jax.lax.dynamic_slice(ypad, (start,), (n,))
+        wsum = wsum + w
+    return jnp.where(delay == 0, y, out / wsum)
+
+
+class SensorDelay(AbstractEffect):
+    """`x_t` recorded `tau` [s] after the motion it measures (a transport or filter delay)."""
+
+    name: ClassVar[str] = "sensor_delay"
+    tau: Float[Array, ""]  # [s]
+    dt: float = eqx.field(static=True)
+
+    def apply(self, y, d, nominal):
+        return lanczos_delay(y, self.tau / self.dt)
+
+    def order(self) -> int:
+        return 1
+
+    def parameters(self):
+        return {"tau_s": _f(self.tau)}
+
+
+class ProcessForce(AbstractEffect):
+    """The measured process force `f` moves the TCP relative to the encoder through a
+    compliance with the structure's poles: `+ g · N(σ) / A(σ) · f` (`A` of the nominal)."""
+
+    name: ClassVar[str] = "process_force"
+    size: Float[Array, " n1"]  # numerator N(σ), scaled by g
+    gain: float = eqx.field(static=True)  # [m/N] scale: RMS(x_t) / RMS(f)
+
+    def contribution(self, d, nominal):
+        return nominal.simulate(d["f"], num=self.gain * self.size)
+
+    def parameters(self):
+        return {"gain_m_per_N": self.gain, "numerator": [float(x) for x in np.asarray(self.size)]}
+
+
+# ------------------------------------------------------------------------------ templates
+
+
+def _residual_peaks(ctx: Context, k: int) -> list[float]:
+    """Frequencies [Hz] of the `k` most prominent peaks of the residual spectrum."""
+    dt = ctx.experiments[0].dt
+    fs = 1.0 / dt
+    p_sum, f = None, None
+    for r in ctx.residuals:
+        r = np.asarray(r)
+        f, p = ss.welch(r - r.mean(), fs=fs, nperseg=min(r.size, 1024))
+        p_sum = p if p_sum is None else p_sum + p
+    band = (f > 2 * fs / 1024) & (f < 0.45 * fs)
+    peaks, props = ss.find_peaks(np.where(band, p_sum, 0.0), prominence=0)
+    if not peaks.size:
+        return [fs / 5]
+    top = peaks[np.argsort(props["prominences"])[::-1][:k]]
+    return [float(f[i]) for i in top]
+
+
+def _t_position(ctx: Context) -> list[AbstractEffect]:
+    ys = np.array([float(e.arrays["pos_y"][0]) for e in ctx.experiments])
+    lo, hi = float(ys.min()), float(ys.max())
+    half = max((hi - lo) / 2, 1e-12)
+    p = int(np.size(ctx.model.nominal.flat()))
+    return [PositionDependence(jnp.zeros(p), (lo + hi) / 2, half)]
+
+
+def _t_mode(ctx: Context) -> list[AbstractEffect]:
+    dt = ctx.experiments[0].dt
+    return [
+        MissingMode(jnp.zeros(2), jnp.asarray(2 * math.pi * fr), jnp.asarray(0.03), dt)
+        for fr in _residual_peaks(ctx, 3)
+    ]
+
+
+def _t_delay(ctx: Context) -> list[AbstractEffect]:
+    dt = ctx.experiments[0].dt
+    # heuristic: up to ~1.5 samples a delay is absorbed by the TMF's numerator
+    return [SensorDelay(jnp.asarray(k * dt), dt) for k in (1.5, 3.0, 6.0, -2.0)]
+
+
+def _t_force(ctx: Context) -> list[AbstractEffect]:
+    xt = np.concatenate([e.y for e in ctx.experiments])
+    f = np.concatenate([np.asarray(e.arrays["f"]) for e in ctx.experiments])
+    fr = float(np.sqrt(np.mean((f - f.mean()) ** 2 + f.mean() ** 2)))
+    if fr <= 0:
+        return []
+    gain = float(np.sqrt(np.mean(xt**2))) / fr
+    n1 = int(ctx.model.nominal.num.shape[0])
+    return [ProcessForce(jnp.zeros(n1), gain)]
+
+
+def _needs_positions(experiments: Sequence[Experiment]) -> str | None:
+    ys = {round(float(e.arrays["pos_y"][0]), 12) for e in experiments}
+    if len(ys) < 2:
+        return "needs experiments at two or more positions y of the other axis"
+    return None
+
+
+def _needs_force(experiments: Sequence[Experiment]) -> str | None:
+    f = np.concatenate([np.asarray(e.arrays["f"]) for e in experiments])
+    if float(np.ptp(f)) <= 0:
+        return "needs a varying process force f; it is constant"
+    return None
+
+
+# ------------------------------------------------------------------------------ family
+
+
+def _fir_noise_var(xe: np.ndarray, xt: np.ndarray, f: np.ndarray | None, taps: int) -> float:
+    """Noise level of `x_t`: the residual variance of a long FIR regression on `x_e` (and
+    `f`), taps −3 … `taps` − 4, i.e. whatever a linear time-invariant map of the inputs
+    cannot explain (sensor noise, and encoder quantisation carried through the TMF). Solved
+    by the normal equations (Cholesky); the variance is corrected for the fitted
+    parameters, `SSR / (n − p)`."""
+    n = xt.size
+    lead = 3
+    m = n - taps + 1  # windows of `taps` samples ending `lead` samples after k
+    if m <= 4 * taps:
+        return float(np.var(xt)) * 1e-6
+    win = np.lib.stride_tricks.sliding_window_view
+    cols = [win(xe, taps)]
+    if f is not None:
+        cols.append(win(f, taps))
+    phi = np.concatenate(cols, axis=1)  # row j: inputs j … j + taps − 1
+    y = xt[taps - 1 - lead : taps - 1 - lead + m]
+    scale = np.sqrt(np.mean(phi**2, axis=0)) + 1e-300
+    phi = phi / scale
+    g = phi.T @ phi
+    g[np.diag_indices_from(g)] += 1e-12 * np.trace(g) / g.shape[0]
+    th = np.linalg.solve(g, phi.T @ y)
+    r = y - phi @ th
+    return float(np.sum(r**2) / (m - phi.shape[1]))
+
+
+class TMFFamily(AbstractFamily):
+    """Encoder-side (`x_e`) to tool-side (`x_t`) motion through one rational TMF.
+
+    **Options:** `order` (numerator and denominator order of the nominal TMF, default 4),
+    `coherence` (lowest coherence of the band used for the initial fit, default 0.5),
+    `fir_taps` (length of the FIR regression behind the noise floor, default 150).
+    """
+
+    name = "tmf"
+    required = ("x_e", "x_t")
+    optional = ("y", "f")
+    target_label = "tool-side motion x_t"
+
+    def __init__(self, **options: Any):
+        super().__init__(**options)
+        order = self.options.get("order", 4)
+        if isinstance(order, bool) or not isinstance(order, int | np.integer) or order < 1:
+            raise ValueError(
+                f"diagnose(tmf): order must be a positive integer (numerator and denominator "
+                f"order of the TMF); got {order!r}."
+            )
+        self.options["order"] = int(order)
+
+    def prepare(self, record: Record, name: str) -> Experiment:
+        order = self.options["order"]
+        n = len(record)
+        n_min = max(64, 20 * (2 * order + 1))
+        if n < n_min:
+            raise ValueError(
+                f"diagnose(tmf): experiment {name!r} has {n} samples; at least {n_min} are "
+                f"needed for a TMF of order {order}. Give longer records."
+            )
+        xe = np.asarray(record["x_e"], float)
+        xt = np.asarray(record["x_t"], float)
+        if float(np.ptp(xe)) == 0.0:
+            raise ValueError(
+                f"diagnose(tmf): x_e of experiment {name!r} is constant; the TMF is not "
+                "identifiable without motion. Give experiments with excitation."
+            )
+        # motion relative to the first sample (the machine is at rest there)
+        xe = xe - xe[0]
+        xt = xt - xt[0]
+        signals = set(record.names)
+        if "y" in record.names:
+            ycol = np.asarray(record["y"], float)
+            if float(np.ptp(ycol)) > 1e-9 * max(1.0, float(np.max(np.abs(ycol)))):
+                raise ValueError(
+                    f"diagnose(tmf): the position y changes within experiment {name!r}; the "
+                    "TMF is simulated per experiment at one position. Cut the record into "
+                    "parts of constant y (Record.slice) and pass them as experiments."
+                )
+            pos = float(ycol[0])
+        elif "y" in record.metadata:
+            pos = float(record.metadata["y"])
+            signals.add("y")
+        else:
+            pos = 0.0
+        has_f = "f" in record.names
+        f = np.asarray(record["f"], float) if has_f else np.zeros(n)
+        taps = int(self.options.get("fir_taps", 150))
+        noise_var = _fir_noise_var(xe, xt, f if has_f and np.ptp(f) > 0 else None, taps)
+        w = max(4, int(round(0.05 / record.dt)))
+        amp = np.sqrt(np.convolve((xe - xe.mean()) ** 2, np.ones(w) / w, mode="same"))
+        ops = {"position y [m]": np.full(n, pos), "x_e amplitude [m]": amp}
+        return Experiment(
+            name=name,
+            t=np.asarray(record.t),
+            arrays={"x_e": xe, "pos_y": np.full(n, pos), "f": f, "y": xt},
+            ops=ops,
+            masks={},
+            noise_var=noise_var,
+            signals=frozenset(signals),
+            source=record,
+        )
+
+    def describe_nominal(self) -> str:
+        o = self.options["order"]
+        return f"one position-independent rational TMF of order {o}/{o}, x_t = T(s) x_e (zoh)"
+
+    def nominal(self, experiments: Sequence[Experiment]) -> StableTMF:
+        order = self.options["order"]
+        dt = experiments[0].dt
+        fs = 1.0 / dt
+        nper = int(min(min(e.n for e in experiments) // 4, 1024))
+        nper = max(nper, 16)
+        # H1 per experiment, averaged with weights n·γ² (experiments at several positions
+        # give a mean TMF, which is what the position-independent nominal model is)
+        h_sum, c_sum, n_sum = 0.0, 0.0, 0.0
+        freq = None
+        for e in experiments:
+            frf = transmissibility(e.y, e.arrays["x_e"], fs, nperseg=nper)
+            freq = np.asarray(frf.frequency)
+            coh_e = np.asarray(frf.coherence).reshape(-1)
+            h_sum = h_sum + e.n * coh_e * np.asarray(frf.H).reshape(-1)
+            c_sum = c_sum + e.n * coh_e
+            n_sum = n_sum + e.n
+        h = h_sum / np.maximum(c_sum, 1e-300)
+        coh = c_sum / n_sum
+        cmin = float(self.options.get("coherence", 0.5))
+        grid = (freq > 0) & (freq < 0.45 * fs)
+        band = grid & (coh >= cmin)
+        if band.sum() < 2 * order + 2:
+            band = grid & (coh >= np.quantile(coh[grid], 0.5))
+        if band.sum() < 2 * order + 2:
+            raise ValueError(
+                "diagnose(tmf): the encoder and tool signals are not coherent over enough "
+                "frequencies to fit a TMF; check that x_t responds to x_e (same excitation)."
+            )
+        # the whole grid with zero weight outside the coherent band: one frequency grid
+        # (one compilation of the fit) whatever the band
+        c = np.clip(coh[grid], 1e-6, 0.999)
+        weights = np.where(band[grid], np.sqrt(c / (1 - c)), 0.0)
+        weights = weights / np.maximum(np.abs(h[grid]), 1e-300)
+        omega = 2 * np.pi * freq[grid]
+        w0 = float(np.sqrt(omega[band[grid]].min() * omega[band[grid]].max()))
+        tf, _ = fit_rational(omega, h[grid], (order, order), weights=weights, throw=False)
+        num = np.asarray(tf.num)
+        den = np.asarray(tf.den)
+        if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
+            # fall back to a unit-gain TMF with modes spread over the band
+            poles = []
+            for wk in np.geomspace(omega.min(), omega.max(), max(order // 2, 1) + 2)[1:-1]:
+                poles += [wk * (-0.05 + 1j), wk * (-0.05 - 1j)]
+            if order % 2:
+                poles.append(-w0)
+            den = np.real(np.poly(poles))
+            num = den.copy()
+            tf = RationalTF(num, den)
+        return StableTMF.from_rational(tf, w0, dt)
+
+    def library(self) -> list[EffectSpec]:
+        return [
+            EffectSpec(
+                "position_dependence",
+                ("x_e", "x_t", "y"),
+                _t_position,
+                testable=_needs_positions,
+                signature="position y",
+                description="TMF coefficients that change with the position of the other axis",
+            ),
+            EffectSpec(
+                "missing_mode",
+                ("x_e", "x_t"),
+                _t_mode,
+                signature="residual spectrum peak",
+                description="a structural mode between encoder and tool the TMF order misses",
+            ),
+            EffectSpec(
+                "sensor_delay",
+                ("x_e", "x_t"),
+                _t_delay,
+                signature="cross-correlation lag",
+                description="the tool-side signal is recorded later than the encoder's",
+            ),
+            EffectSpec(
+                "process_force",
+                ("x_e", "x_t", "f"),
+                _t_force,
+                testable=_needs_force,
+                signature="process force f",
+                description="a process force at the tool deflects it relative to the encoder",
+            ),
+        ]

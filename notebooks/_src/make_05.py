@@ -1,0 +1,95 @@
+"""Generate and execute notebooks/05_sim_to_real_gap.ipynb (run from the repository root)."""
+
+import nbformat as nbf
+from nbclient import NotebookClient
+
+md, code = nbf.v4.new_markdown_cell, nbf.v4.new_code_cell
+cells = [
+    md(
+        "# 05 — Sim-to-real gap diagnosis\n\n"
+        "A calibrated model still disagrees with the machine. `jaxvs.diagnose` answers three "
+        "questions, on data the calibration never saw:\n\n"
+        "1. **Where** is the gap? A gap map over time windows, frequency bands and operating "
+        "points (velocity reversals, speed, position, direction, recorded signals such as the "
+        "EMPS force pulses), with circular-shift permutation p-values that respect the "
+        "residual's autocorrelation and Benjamini–Hochberg control of false discoveries.\n"
+        "2. **Which** unmodelled effect causes it? Every candidate of the family's library "
+        "(DESIGN.md §3.2) is a differentiable augmentation of the nominal model that equals it "
+        "at zero size; each is added and the whole model is recalibrated by "
+        "Levenberg–Marquardt. A candidate is accepted only when the held-out gap reduction has "
+        "a moving-block bootstrap interval excluding zero and ΔBIC > 10; effects are added "
+        "greedily until none passes.\n"
+        "3. **How far** does the gap shrink, and what is left against the noise floor?\n\n"
+        "First on the real EMPS drive, then blind on a twin with a hidden effect."
+    ),
+    code(
+        "import jax\n"
+        "jax.config.update('jax_enable_x64', True)\n"
+        "import jax.random as jr\n"
+        "from IPython.display import Markdown, display\n"
+        "import matplotlib.pyplot as plt\n"
+        "import jaxvs\n"
+        "from jaxvs.plotting._diagnosis import plot_gap_map, plot_before_after, plot_spectra\n"
+        "from jaxvs.twins import DriveTwin, draw_drive_effect\n"
+        "DATA = '../../shared/data/EMPS'"
+    ),
+    md(
+        "## EMPS: a real prismatic drive\n\n"
+        "Nominal model: the rigid axis `M q̈ + Fv q̇ + offset = u` *without* Coulomb friction, "
+        "calibrated on `DATA_EMPS.mat` and validated on `DATA_EMPS_PULSES.mat` (which carries "
+        "force pulses). The files are read as they are."
+    ),
+    code(
+        "emps = jaxvs.diagnose(f'{DATA}/DATA_EMPS.mat', f'{DATA}/DATA_EMPS_PULSES.mat',\n"
+        "                      family='drive', max_effects=3, progress=True)\n"
+        "display(Markdown(emps.to_markdown()))"
+    ),
+    md(
+        "Coulomb friction is named first, with `Fc` within a fraction of a percent of the "
+        "published IDIM-LS value 20.39 N, then asymmetric friction — as the EMPS description "
+        "found. Once Coulomb friction is in, the remaining gap concentrates at the velocity "
+        "reversals, at standstill and while the force pulses of the validation file are on:"
+    ),
+    code(
+        "for r in emps['rounds'][1:]:\n"
+        "    print(f\"before round {r['round']}:\")\n"
+        "    for w in r.get('where_before', []):\n"
+        "        print(f\"   {w['label']:40s} share of gap {w['share']:.2f} on {w['fraction']:.2f} of the samples\")"
+    ),
+    code(
+        "fig, axs = plt.subplots(1, 2, figsize=(15, 4.5))\n"
+        "plot_gap_map(emps, ax=axs[0])\n"
+        "plot_spectra(emps, ax=axs[1])\n"
+        "fig.tight_layout()"
+    ),
+    code("plot_before_after(emps);"),
+    md(
+        "## Blind: a drive twin with a hidden effect\n\n"
+        "The twin's friction is a LuGre model with a Stribeck peak — built differently from the "
+        "library's smooth Coulomb/Stribeck laws — and its nominal parameters are perturbed by "
+        "10 %. The diagnosis sees only the two records."
+    ),
+    code(
+        "k1, k2, k3, k4 = jr.split(jr.key(7), 4)\n"
+        "hidden = draw_drive_effect(k1, 'stribeck_friction', magnitude=0.6)\n"
+        "twin = DriveTwin(effects=hidden).perturb(k2, 0.1)\n"
+        "cal, val = twin.experiment(k3, duration=12.0), twin.experiment(k4, duration=6.0)\n"
+        "blind = jaxvs.diagnose(cal, val, family='drive', max_effects=2, progress=True)\n"
+        "display(Markdown(blind.to_markdown()))\n"
+        "print('hidden:', hidden)\n"
+        "print('named :', blind.verdict['effects'], '-> primary', blind.verdict['primary'])"
+    ),
+    code("plot_before_after(blind);"),
+    md(
+        "The same call serves the `tmf` and `thermal` families (`jaxvs diagnose DATA ... "
+        "--family tmf|thermal`); `benchmarks/blind_diagnosis.py` runs the blind benchmark "
+        "over all families and reports the confusion matrix, accuracy, false positives, "
+        "shrink and time per case."
+    ),
+]
+nb = nbf.v4.new_notebook(cells=cells)
+nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+NotebookClient(nb, timeout=1500, kernel_name="python3",
+               resources={"metadata": {"path": "notebooks"}}).execute()
+nbf.write(nb, "notebooks/05_sim_to_real_gap.ipynb")
+print("written notebooks/05_sim_to_real_gap.ipynb")
