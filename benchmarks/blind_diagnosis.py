@@ -163,6 +163,12 @@ def main(argv=None) -> int:
             flush=True,
         )
 
+        _write(rows, args, families)  # after every case: a long run can be read as it goes
+    print(_write(rows, args, families))
+    return 0
+
+
+def _write(rows, args, families) -> str:
     summary = _summarise(rows)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -172,7 +178,7 @@ def main(argv=None) -> int:
         "jax": jax.__version__,
         "python": sys.version.split()[0],
         "load_average": os.getloadavg(),
-        "cases": args.cases,
+        "cases_planned": args.cases,
         "seed": args.seed,
         "families": families,
     }
@@ -181,8 +187,7 @@ def main(argv=None) -> int:
     )
     md = _markdown(summary, meta)
     (out / "blind_diagnosis.md").write_text(md)
-    print(md)
-    return 0
+    return md
 
 
 def _summarise(rows):
@@ -225,13 +230,17 @@ def _summarise(rows):
     }
 
 
+def _fmt(x) -> str:
+    return "—" if x is None else f"{x:.2f}"
+
+
 def _markdown(s, meta):
     fpr = s["false_positive_rate"]
     fp = "—" if fpr is None else f"{100 * fpr:.1f} %"
     lines = [
         "# Blind diagnosis benchmark",
         "",
-        f"{s['cases']} cases ({s['effect_free_cases']} effect-free), "
+        f"{s['cases']} of {meta['cases_planned']} planned cases ({s['effect_free_cases']} effect-free), "
         f"{s['median_samples']:.0f} samples per case, {meta['cpu_count']} CPU cores "
         f"(load average at the end {meta['load_average'][0]:.1f}), jax {meta['jax']}.",
         "",
@@ -239,8 +248,8 @@ def _markdown(s, meta):
         "|---|---|---|",
         f"| top-1 accuracy | {100 * s['top1_accuracy']:.1f} % | ≥ 90 % |",
         f"| false positives on effect-free cases | {fp} | ≤ 5 % |",
-        f"| median shrink (cases with an effect) | {s['median_shrink_effect_cases']:.2f} | ≥ 0.8 |",
-        f"| median shrink (correctly named) | {s['median_shrink_correct_cases']} | |",
+        f"| median shrink (cases with an effect) | {_fmt(s['median_shrink_effect_cases'])} | ≥ 0.8 |",
+        f"| median shrink (correctly named) | {_fmt(s['median_shrink_correct_cases'])} | |",
         f"| time per case (median / max) | {s['median_seconds']:.1f} s / {s['max_seconds']:.1f} s | ≤ 60 s |",
         "",
         "Per family:",

@@ -5,8 +5,8 @@
    coherence), one rational TMF per position is calibrated in a single vectorised
    `fit_rational` call, and the calibrated family drives the virtual sensor (TCP
    position from the linear encoder) on the same records.
-5. A closed-loop drive twin with a hidden friction effect (LuGre with a Stribeck peak,
-   never shown to the diagnosis) produces a calibration and a validation experiment;
+5. A closed-loop drive twin with a hidden effect (a compliant motor-load coupling, never
+   shown to the diagnosis) produces a calibration and a validation experiment;
    `jaxvs.diagnose` recalibrates the rigid-axis model, maps the gap, names the missing
    effect and reports how far the gap shrinks on the held-out experiment.
 """
@@ -151,7 +151,7 @@ def run_demo(out: str = "demo-report", n_positions: int = 8, seed: int = 0) -> i
     from jaxvs.twins import DriveTwin, draw_drive_effect
 
     k1, k2, k3, k4 = jr.split(jr.key(seed + 1), 4)
-    hidden = draw_drive_effect(k1, "stribeck_friction", magnitude=0.5)
+    hidden = draw_drive_effect(k1, "resonance", magnitude=0.5)
     drive = DriveTwin(effects=hidden).perturb(k2, 0.1)
     cal = drive.experiment(k3, duration=17.5)
     val = drive.experiment(k4, duration=7.5)
@@ -162,7 +162,7 @@ def run_demo(out: str = "demo-report", n_positions: int = 8, seed: int = 0) -> i
     print()
     print(report.to_markdown())
     print(
-        "(hidden in the twin, never shown to the diagnosis: stribeck_friction (LuGre) -- "
+        "(hidden in the twin, never shown to the diagnosis: resonance -- "
         f"found: {report.verdict['primary'] or 'none'})"
     )
     print()

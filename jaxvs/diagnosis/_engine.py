@@ -326,9 +326,10 @@ def search(
     history: list[dict[str, Any]] = []
     round_residuals: list[list[np.ndarray]] = []
 
+    dof0 = _dof(model, exps[:n_cal_exp])
     for rnd in range(1, max_effects + 1):
         ssr0 = float(cost[0])
-        bic0 = bic(ssr0, n_cal, _dof(model, exps[:n_cal_exp]))
+        bic0 = bic(ssr0, n_cal, dof0)
         e_val0 = np.concatenate(res_all[n_cal_exp:])
         blen = block_length(e_val0)
         for s in library:
@@ -366,11 +367,13 @@ def search(
                 starts, [slot] * len(starts), exps, n_cal_exp, scale, max_steps
             )
             candidates[s.name].seconds += time.perf_counter() - t0
-            tried.append((s, fitted, costs, starts_ssr, preds))
+            # the structure (hence the parameter count) is that of the starting points
+            dof_s = _dof(starts[0], exps[:n_cal_exp])
+            tried.append((s, fitted, costs, starts_ssr, preds, dof_s))
         elapsed = time.perf_counter() - t_round
 
         round_results: list[CandidateResult] = []
-        for s, fitted, costs, starts_ssr, preds in tried:
+        for s, fitted, costs, starts_ssr, preds, dof_s in tried:
             k = int(np.argmin(costs))
             m1, ssr1, pred1 = fitted[k], float(costs[k]), preds[k]
             c = candidates[s.name]
@@ -378,7 +381,7 @@ def search(
             if not np.isfinite(ssr1):
                 continue
             r1 = [e.y - p for e, p in zip(exps, pred1)]
-            dbic = bic0 - bic(ssr1, n_cal, _dof(m1, exps[:n_cal_exp]))
+            dbic = bic0 - bic(ssr1, n_cal, dof_s)
             g0, g1, shrink, d_int, s_int = gap_change_interval(
                 e_val0,
                 np.concatenate(r1[n_cal_exp:]),
@@ -399,7 +402,7 @@ def search(
             c.parameters = eff.parameters()
             c.physical = eff.physical()
             c.model = m1
-            c._state = (r1, ssr1)  # type: ignore[attr-defined]
+            c._state = (r1, ssr1, dof_s)  # type: ignore[attr-defined]
             round_results.append(c)
         round_results.sort(key=lambda c: -(c.delta_bic or -np.inf))
 
@@ -431,7 +434,7 @@ def search(
         chosen.accepted = True
         accepted.append(chosen.effect)
         model = chosen.model
-        res_all, ssr = chosen._state  # type: ignore[attr-defined]
+        res_all, ssr, dof0 = chosen._state  # type: ignore[attr-defined]
         cost = np.array([ssr])
         say(f"round {rnd}: accepted {chosen.effect} (validation gap {chosen.validation_gap:.4f})")
         if chosen.validation_gap <= stop_at_noise * noise_floor:

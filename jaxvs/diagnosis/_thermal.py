@@ -38,7 +38,7 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
-from ..calibration import positive
+from ..calibration._parametrise import Positive
 from ..data import Record
 from ._base import AbstractEffect, AbstractFamily, Context, EffectSpec, Experiment
 
@@ -78,6 +78,15 @@ class StaticRegression(eqx.Module):
 
 
 # ------------------------------------------------------------------------------ effects
+
+
+def _positive(x) -> Positive:
+    """A positive shape parameter as a log-parametrised leaf; a value that underflowed
+    to zero (or went negative) in an earlier calibration restarts from a tiny floor."""
+    x = jnp.asarray(x)
+    return Positive(jnp.log(jnp.maximum(x, 1e-12)))
+
+
 
 
 def first_order_lag(
@@ -128,7 +137,7 @@ class Dynamics(AbstractEffect):
         return 1
 
     def constrained(self):
-        return eqx.tree_at(lambda e: e.tau, self, replace_fn=positive)
+        return eqx.tree_at(lambda e: e.tau, self, replace_fn=_positive)
 
     def parameters(self):
         return {"tau_s": _f(self.tau)}
@@ -176,7 +185,7 @@ class SpeedNonlinearity(AbstractEffect):
         return self.size[0] * jnp.where(x > 0, jnp.exp(self.alpha * jnp.log(safe)), 0.0)
 
     def constrained(self):
-        return eqx.tree_at(lambda e: e.alpha, self, replace_fn=positive)
+        return eqx.tree_at(lambda e: e.alpha, self, replace_fn=_positive)
 
     def parameters(self):
         return {"c_nonlinear": _f(self.size[0]), "alpha": _f(self.alpha), "v_max": self.scale}

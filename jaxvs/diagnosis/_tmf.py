@@ -39,7 +39,8 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
-from ..calibration import fit_rational, positive
+from ..calibration import fit_rational
+from ..calibration._parametrise import Positive
 from ..data import Record
 from ..models import RationalTF
 from ..signal import transmissibility
@@ -123,6 +124,23 @@ def simulate_modal(
     return d * u + y
 
 
+def polish_roots(den: Float[Array, " n1"], start: Array, iterations: int = 24) -> Array:
+    """Roots of the monic polynomial `den` (highest power first) by the Durand–Kerner
+    (Weierstrass) simultaneous iteration from `start`, e.g. the roots of a nearby
+    polynomial. A fixed number of iterations, so it is `jit`/`vmap`-friendly and
+    differentiable; converged iterates give the implicit-function derivative."""
+    n = start.shape[0]
+    eye = jnp.eye(n, dtype=bool)
+    den = den.astype(start.dtype)
+
+    def step(z, _):
+        diff = jnp.where(eye, 1.0, z[:, None] - z[None, :])
+        return z - jnp.polyval(den, z) / jnp.prod(diff, axis=1), None
+
+    z, _ = jax.lax.scan(step, start, None, length=iterations)
+    return z
+
+
 class StableTMF(eqx.Module):
     """A rational TMF of equal orders with an always-stable denominator, `x_t = T(s) x_e`.
 
@@ -178,6 +196,28 @@ class StableTMF(eqx.Module):
     def __call__(self, d: Mapping[str, Array]) -> Float[Array, " n"]:
         return self.simulate(d["x_e"])
 
+    def scaled_denominator(self) -> Float[Array, " n1"]:
+        """`A(σ)`, monic, highest power first."""
+        _, lw, lz, lp = self._split(None)
+        w, z = jnp.exp(lw), jnp.exp(lz)
+        den = jnp.ones((1,), w.dtype)
+        for k in range(w.shape[0]):
+            den = _polymul(den, jnp.stack([jnp.ones_like(w[k]), 2 * z[k] * w[k], w[k] ** 2]))
+        for k in range(lp.shape[0]):
+            den = _polymul(den, jnp.stack([jnp.ones_like(lp[k]), jnp.exp(lp[k])]))
+        return den
+
+    def simulate_shifted(
+        self, u: Float[Array, " n"], dnum: Float[Array, " n1"], dden: Float[Array, " n"]
+    ) -> Float[Array, " n"]:
+        """Response of `(B(σ) + dnum) / (A(σ) + [0, dden])`: coefficients moved linearly
+        (the leading denominator coefficient stays 1); poles by Durand–Kerner from the
+        nominal ones."""
+        den = self.scaled_denominator() + jnp.concatenate([jnp.zeros((1,), dden.dtype), dden])
+        p = polish_roots(den, self.scaled_poles())
+        d, r = partial_fractions(self.num + dnum, p)
+        return simulate_modal(d, r * self.w0, p * self.w0, u, self.dt)
+
     def tf(self) -> RationalTF:
         """The TMF as a `RationalTF` in physical coefficients (concrete use)."""
         num, lw, lz, lp = (np.asarray(x) for x in self._split(None))
@@ -229,25 +269,46 @@ class StableTMF(eqx.Module):
 # ------------------------------------------------------------------------------ effects
 
 
+def _positive(x) -> Positive:
+    """A positive shape parameter as a log-parametrised leaf; a value that underflowed
+    to zero (or went negative) in an earlier calibration restarts from a tiny floor."""
+    x = jnp.asarray(x)
+    return Positive(jnp.log(jnp.maximum(x, 1e-12)))
+
+
+
+
 class PositionDependence(AbstractEffect):
-    """Every TMF parameter linear in the other axis' position: `θ(y) = θ₀ + x·Δθ`,
-    `x = (y − ȳ)/h` with `ȳ`, `h` the centre and half-range of the calibration positions."""
+    """TMF coefficients linear in the other axis' position: `B(σ; y) = B₀(σ) + x·ΔB(σ)`,
+    `A(σ; y) = A₀(σ) + x·ΔA(σ)` (monic), `x = (y − ȳ)/h` with `ȳ`, `h` the centre and
+    half-range of the calibration positions.
+
+    Linear coefficients are exact when a stiffness or mass of the structure changes
+    linearly with the position: the numerator and denominator of a TMF are cofactors of
+    the dynamic stiffness matrix, multilinear in its stiffnesses and masses.
+    """
 
     name: ClassVar[str] = "position_dependence"
-    size: Float[Array, " p"]  # Δθ per half-range, for (num, log ω, log ζ, log p)
+    size: Float[Array, " p"]  # (ΔB (order + 1), ΔA (order)) per half-range, scaled σ
     centre: float = eqx.field(static=True)
     half_range: float = eqx.field(static=True)
 
     def contribution(self, d, nominal):
         x = (d["pos_y"][0] - self.centre) / self.half_range
-        return nominal.simulate(d["x_e"], x * self.size) - nominal(d)
+        n1 = nominal.num.shape[0]
+        delta = x * self.size
+        diff = nominal.simulate_shifted(d["x_e"], delta[:n1], delta[n1:]) - nominal(d)
+        # exactly zero at zero size (the polished roots differ from the nominal ones by
+        # rounding), with the derivative of `diff` kept
+        return _exact_zero_at(jnp.all(delta == 0), diff)
 
     def parameters(self):
         s = np.asarray(self.size)
         return {
             "y_centre": self.centre,
             "y_half_range": self.half_range,
-            "max_relative_change": float(np.max(np.abs(s))),
+            "numerator_slope_norm": float(np.linalg.norm(s[: (s.size + 1) // 2])),
+            "denominator_slope_norm": float(np.linalg.norm(s[(s.size + 1) // 2 :])),
         }
 
 
@@ -267,7 +328,7 @@ class MissingMode(AbstractEffect):
         return simulate_modal(jnp.zeros((), w.dtype), r, p, d["x_e"], self.dt)
 
     def constrained(self):
-        return eqx.tree_at(lambda e: (e.omega, e.zeta), self, replace_fn=positive)
+        return eqx.tree_at(lambda e: (e.omega, e.zeta), self, replace_fn=_positive)
 
     def parameters(self):
         s = np.asarray(self.size)
@@ -277,6 +338,12 @@ class MissingMode(AbstractEffect):
             "residue_static": float(s[0]),
             "residue_velocity": float(s[1]),
         }
+
+
+def _exact_zero_at(cond: Array, e: Array) -> Array:
+    """`e`, but exactly 0 where `cond` holds, keeping the derivative of `e` there (a
+    `jnp.where` would zero it and stall the least-squares start at zero size)."""
+    return e - jnp.where(cond, jax.lax.stop_gradient(e), 0.0)
 
 
 def lanczos_delay(
@@ -304,7 +371,7 @@ def lanczos_delay(
         start = pad - shift - 1 + j
         out = out + w * jax.lax.dynamic_slice(ypad, (start,), (n,))
         wsum = wsum + w
-    return jnp.where(delay == 0, y, out / wsum)
+    return y + _exact_zero_at(delay == 0, out / wsum - y)
 
 
 class SensorDelay(AbstractEffect):
@@ -336,7 +403,10 @@ class ProcessForce(AbstractEffect):
         return nominal.simulate(d["f"], num=self.gain * self.size)
 
     def parameters(self):
-        return {"gain_m_per_N": self.gain, "numerator": [float(x) for x in np.asarray(self.size)]}
+        out = {"gain_m_per_N": self.gain}
+        for i, b in enumerate(np.asarray(self.size)[::-1]):
+            out[f"b{i}"] = float(b)  # coefficient of σ^i, σ = s / w0
+        return out
 
 
 # ------------------------------------------------------------------------------ templates
@@ -363,8 +433,8 @@ def _t_position(ctx: Context) -> list[AbstractEffect]:
     ys = np.array([float(e.arrays["pos_y"][0]) for e in ctx.experiments])
     lo, hi = float(ys.min()), float(ys.max())
     half = max((hi - lo) / 2, 1e-12)
-    p = int(np.size(ctx.model.nominal.flat()))
-    return [PositionDependence(jnp.zeros(p), (lo + hi) / 2, half)]
+    n1 = int(ctx.model.nominal.num.shape[0])
+    return [PositionDependence(jnp.zeros(2 * n1 - 1), (lo + hi) / 2, half)]
 
 
 def _t_mode(ctx: Context) -> list[AbstractEffect]:

@@ -1,4 +1,5 @@
 """Generate and execute notebooks/02_thermal_virtual_sensor.ipynb (run from the repository root)."""
+# ruff: noqa: E501  (notebook source lines are kept as they read in the notebook)
 
 import nbformat as nbf
 from nbclient import NotebookClient

@@ -1,0 +1,137 @@
+"""Diagnosis of the `tmf` family on the machine-structure twin (DESIGN.md §3.2).
+
+The twin's nominal encoder-to-TCP motion is one position-independent TMF of order (2, 4);
+its effects are built as structure (a tool oscillator, a delayed reference sensor, a
+softening head joint), not as the library's augmentations. The diagnoses share one signal
+set and record length, so they share their compilations.
+"""
+
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+import pytest
+
+import jaxvs
+from jaxvs.diagnosis._tmf import (
+    MissingMode,
+    PositionDependence,
+    StableTMF,
+    lanczos_delay,
+)
+from jaxvs.twins import MachineStructureTwin
+
+DT = 1e-3
+# A 4/4 TMF with modes near 122 Hz and 214 Hz (the twin's nominal at y = 0).
+TMF = jaxvs.RationalTF(
+    [0.0, 0.0, 1.728e9, 1.728e13, 4.32e16], [4.05e4, 1.944e7, 9.8928e10, 1.728e13, 4.32e16]
+)
+
+
+def _records(effects, ys=(0.3, 0.3, 0.3), key=3):
+    """Three 4 s records; without `f` (no process force measured)."""
+    recs = MachineStructureTwin(effects=effects).tmf_experiment(jr.key(key), ys=ys, duration=4.0)
+    return [r.select(["x_e", "x_t", "y"]) for r in recs]
+
+
+@pytest.fixture(scope="module")
+def u():
+    return jnp.asarray(np.random.default_rng(0).normal(size=2000))
+
+
+def test_stable_tmf_matches_jaxvs_simulate(u):
+    # Oracle: jaxvs.simulate (zoh) of the same rational TMF; rounding only.
+    model = StableTMF.from_rational(TMF, 1000.0, DT)
+    ref = np.asarray(jaxvs.simulate(TMF, u, DT, method="zoh"))
+    np.testing.assert_allclose(np.asarray(model({"x_e": u})), ref, atol=1e-11 * np.abs(ref).max())
+    # an odd order (one real pole) too
+    tf3 = jaxvs.RationalTF([1.0, 2.0, 3.0, 4.0], [1.0, 30.0, 2e4, 1e5])
+    m3 = StableTMF.from_rational(tf3, 100.0, DT)
+    ref3 = np.asarray(jaxvs.simulate(tf3, u, DT))
+    np.testing.assert_allclose(np.asarray(m3({"x_e": u})), ref3, atol=1e-11 * np.abs(ref3).max())
+    params = model.parameters()
+    assert params["f_1_hz"] == pytest.approx(122.1, rel=1e-3)
+    assert params["static_gain"] == pytest.approx(1.0, rel=1e-12)
+
+
+def test_missing_mode_and_position_dependence_match_rational_simulation(u):
+    model = StableTMF.from_rational(TMF, 1000.0, DT)
+    w = 2 * np.pi * 200.0
+    mode = MissingMode(jnp.array([0.3, -0.2]), jnp.asarray(w), jnp.asarray(0.03), DT)
+    ref = jaxvs.simulate(jaxvs.RationalTF([-0.2 * w, 0.3 * w * w], [1, 0.06 * w, w * w]), u, DT)
+    np.testing.assert_allclose(
+        np.asarray(mode.contribution({"x_e": u}, model)), np.asarray(ref), atol=1e-11
+    )
+    # moved coefficients: B + x ΔB over A + x ΔA, simulated by jaxvs from the coefficients
+    size = jnp.array([0.0, 0.0, 0.01, -0.02, 0.03, 0.02, -0.05, 0.1, 0.03])
+    eff = PositionDependence(size, 0.2, 0.1)
+    d = {"x_e": u, "pos_y": jnp.full(u.shape, 0.4)}  # x = 2
+    got = np.asarray(model(d) + eff.contribution(d, model))
+    powers = 1000.0 ** np.arange(5)
+    num = (np.asarray(model.num) + 2 * np.asarray(size[:5])) * powers
+    den = (np.asarray(model.scaled_denominator()) + 2 * np.r_[0.0, size[5:]]) * powers
+    ref = np.asarray(jaxvs.simulate(jaxvs.RationalTF(num, den), u, DT))
+    np.testing.assert_allclose(got, ref, atol=1e-10 * np.abs(ref).max())
+    # zero size is exactly the nominal model (the engine gates effects by data)
+    zero = PositionDependence(jnp.zeros(9), 0.2, 0.1).contribution(d, model)
+    assert np.all(np.asarray(zero) == 0.0)
+
+
+def test_fractional_delay_of_band_limited_signal():
+    k = jnp.arange(400.0)
+    for f in (0.1, 0.3):  # cycles per sample
+        x = jnp.sin(2 * np.pi * f * k)
+        for delay in (2.4, -1.3, 3.0):
+            got = np.asarray(lanczos_delay(x, jnp.asarray(delay)))
+            exact = np.sin(2 * np.pi * f * (np.asarray(k) - delay))
+            # Lanczos-8 interpolation: 2e-3 up to 0.3 cycles/sample (edges excluded)
+            np.testing.assert_allclose(got[20:-20], exact[20:-20], atol=2e-3)
+    assert np.array_equal(np.asarray(lanczos_delay(x, jnp.asarray(0.0))), np.asarray(x))
+
+
+@pytest.mark.slow
+def test_effect_free_twin_accepts_nothing_and_reports_untestable():
+    rep = jaxvs.diagnose(_records({}), family="tmf")
+    assert rep.verdict["effects"] == []
+    by_name = {c["effect"]: c for c in rep.candidates}
+    assert by_name["process_force"]["testable"] is False
+    assert "f" in by_name["process_force"]["reason"]
+    assert by_name["position_dependence"]["testable"] is False
+    assert "position" in by_name["position_dependence"]["reason"]
+    assert by_name["missing_mode"]["testable"] and by_name["sensor_delay"]["testable"]
+    # an adequate model leaves the noise: the validation gap within 30 % of the floor
+    assert rep.gap["validation"] == pytest.approx(rep.gap["noise_floor"], rel=0.3)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "effect, magnitude",
+    [
+        ("sensor_delay", 3.5e-3),
+        ("missing_mode", {"frequency_hz": 220.0, "mass_ratio": 0.1, "damping": 0.03}),
+    ],
+)
+def test_typical_effect_is_found_first_and_closes_the_gap(effect, magnitude):
+    rep = jaxvs.diagnose(_records({effect: magnitude}), family="tmf")
+    assert rep.verdict["effects"][:1] == [effect]
+    found = next(c for c in rep.candidates if c["effect"] == effect)
+    assert found["accepted"] and found["shrink"] > 0.5
+    if effect == "sensor_delay":
+        # ~1 ms of a delay is absorbed by the spare numerator freedom of the 4/4 TMF
+        assert 2.5e-3 < found["parameters"]["tau_s"] < 5e-3
+
+
+def test_missing_required_signal_is_named():
+    rec = jaxvs.data.Record({"x_e": np.sin(np.arange(500.0)), "y": np.zeros(500)}, dt=DT)
+    with pytest.raises(ValueError, match="x_t"):
+        jaxvs.diagnose([rec, rec], family="tmf")
+
+
+def test_bad_order_and_varying_position_are_rejected():
+    n = 500
+    x = np.sin(0.3 * np.arange(n))
+    rec = jaxvs.data.Record({"x_e": x, "x_t": x}, dt=DT)
+    with pytest.raises(ValueError, match="order"):
+        jaxvs.diagnose([rec, rec], family="tmf", order=0)
+    moving = jaxvs.data.Record({"x_e": x, "x_t": x, "y": np.linspace(0, 0.5, n)}, dt=DT)
+    with pytest.raises(ValueError, match="constant y"):
+        jaxvs.diagnose([moving, moving], family="tmf")
