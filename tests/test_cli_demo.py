@@ -61,7 +61,14 @@ def test_demo_end_to_end(tmp_path, capsys):
         # the virtual sensor beats the encoder alone (100 % = no better)
         assert row["virtual_sensor_error_vs_deflection"] < 0.6
     assert (tmp_path / "rep" / "tmf_family_bode.png").stat().st_size > 10_000
-    assert "TMF family" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "TMF family" in out
+    # step 5: a sim-to-real diagnosis of the drive twin, with the DESIGN.md report schema
+    diag = json.loads((tmp_path / "rep" / "diagnosis" / "report.json").read_text())
+    assert diag["family"] == "drive"
+    assert set(diag) >= {"gap", "where", "candidates", "verdict"}
+    assert diag["gap"]["validation"] >= diag["verdict"]["validation_gap"] >= 0
+    assert "Sim-to-real gap diagnosis" in out
 
 
 def test_cli_requires_a_command(capsys):

@@ -17,12 +17,16 @@ systematic, but it removes the sensor noise of the inputs, which a lag would oth
 Each candidate effect is a differentiable augmentation that equals the nominal model when
 its size (or its time constant) is zero:
 
-| effect | augmentation of the predicted `T_bearing` [°C] |
-|---|---|
-| `dynamics` | the prediction passed through a first-order lag of time constant `τ` (heat capacity of the inner ring): exact discretisation for inputs linear between samples |
-| `ambient_temperature` | `+ c_a·(T_air − T_air,min)` |
-| `coolant_temperature` | `+ c_w·(T_water − T_water,min)` |
-| `speed_nonlinearity` | `+ c_n·(|v_m| / v_max)^α`: friction heat growing faster than linearly with speed (Palmgren: `α ≈ 1.3-2`) |
+Augmentations of the predicted `T_bearing` [°C]:
+
+- `dynamics`: the prediction passed through a first-order lag of time constant `τ` (heat
+  capacity of the inner ring); exact discretisation for inputs linear between samples,
+  started from the measured target.
+- `ambient_temperature`: `+ c_a·(T_air − T_air,min)`.
+- `coolant_temperature`: `+ c_w·(T_water − T_water,min)`.
+- `speed_nonlinearity`: `+ c2·x² + c3·x³`, `x = |v_m| / v_max`: friction heat growing
+  faster than linearly with speed (Palmgren: `∝ n^α`, `α ≈ 1.3-2`; reported as the
+  equivalent `α`).
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
+from ..calibration import fixed, unwrap
 from ..calibration._parametrise import Positive
 from ..data import Record
 from ._base import AbstractEffect, AbstractFamily, Context, EffectSpec, Experiment
@@ -52,28 +57,32 @@ def _f(x) -> float:
 
 
 class StaticRegression(eqx.Module):
-    """The study's static regression on bias-free inputs (eq. 2-3), `T_bearing` [°C].
+    """The study's static regression (eq. 2-3), `T_bearing` [°C], with the biases folded
+    into the intercept: `T_bearing = c0' + c1·T_chassis [+ c2·v_m]`.
 
-    **Fields:** `coef` = `(c0 [°C], c1 [-], c2 [K/rpm])` (or `(c0, c1)` without speed);
-    `bias_chassis` [°C] and `bias_speed` [rpm] (`None`: no speed term) are constants.
+    The study's form on bias-free inputs, `c0 + c1·(T_chassis − b_c) + c2·(v_m − b_v)`, is
+    the same function with `c0 = c0' + c1·b_c + c2·b_v`; [`ThermalFamily`][] reports it that
+    way with the biases of its calibration data. Keeping the biases out of the model keeps
+    its structure independent of the data (one compilation for every data set).
+
+    **Fields:** `coef` = `(c0' [°C], c1 [-], c2 [K/rpm])`, or `(c0', c1)` when
+    `use_speed` is false.
     """
 
     coef: Float[Array, " k"]
-    bias_chassis: float = eqx.field(static=True)
-    bias_speed: float | None = eqx.field(static=True, default=None)
+    use_speed: bool = eqx.field(static=True, default=True)
 
     def __call__(self, d: Mapping[str, Array]) -> Float[Array, " n"]:
-        y = self.coef[0] + self.coef[1] * (d["T_chassis"] - self.bias_chassis)
-        if self.bias_speed is not None:
-            y = y + self.coef[2] * (d["v_m"] - self.bias_speed)
+        y = self.coef[0] + self.coef[1] * d["T_chassis"]
+        if self.use_speed:
+            y = y + self.coef[2] * d["v_m"]
         return y
 
     def parameters(self) -> dict[str, float]:
         c = np.asarray(self.coef)
-        out = {"c0": float(c[0]), "c_chassis": float(c[1]), "bias_chassis": self.bias_chassis}
-        if self.bias_speed is not None:
+        out = {"intercept": float(c[0]), "c_chassis": float(c[1])}
+        if self.use_speed:
             out["c_speed"] = float(c[2])
-            out["bias_speed"] = self.bias_speed
         return out
 
 
@@ -148,13 +157,16 @@ class AmbientTemperature(AbstractEffect):
 
     name: ClassVar[str] = "ambient_temperature"
     size: Float[Array, 1]  # [-]
-    bias: float = eqx.field(static=True)
+    bias: Any  # [°C], the minimum over the calibration data; never calibrated
 
     def contribution(self, d, nominal):
         return self.size[0] * (d["T_air"] - self.bias)
 
+    def constrained(self):
+        return eqx.tree_at(lambda e: e.bias, self, replace_fn=fixed)
+
     def parameters(self):
-        return {"c_air": _f(self.size[0]), "bias_air": self.bias}
+        return {"c_air": _f(self.size[0]), "bias_air": _f(self.bias)}
 
 
 class CoolantTemperature(AbstractEffect):
@@ -162,33 +174,63 @@ class CoolantTemperature(AbstractEffect):
 
     name: ClassVar[str] = "coolant_temperature"
     size: Float[Array, 1]  # [-]
-    bias: float = eqx.field(static=True)
+    bias: Any  # [°C], the minimum over the calibration data; never calibrated
 
     def contribution(self, d, nominal):
         return self.size[0] * (d["T_water"] - self.bias)
 
+    def constrained(self):
+        return eqx.tree_at(lambda e: e.bias, self, replace_fn=fixed)
+
     def parameters(self):
-        return {"c_water": _f(self.size[0]), "bias_water": self.bias}
+        return {"c_water": _f(self.size[0]), "bias_water": _f(self.bias)}
+
+
+def equivalent_exponent(c2: float, c3: float) -> float:
+    """The exponent `α` of the power law `a·x^α + b·x` closest (least squares on
+    `x ∈ [0, 1]`) to `c2·x² + c3·x³`: the Palmgren-like exponent a fitted polynomial
+    nonlinearity corresponds to (`nan` when it is zero)."""
+    x = np.linspace(0.0, 1.0, 201)
+    f = c2 * x**2 + c3 * x**3
+    if not np.any(f):
+        return float("nan")
+    best, alpha = np.inf, float("nan")
+    for a in np.linspace(1.02, 4.0, 299):
+        phi = np.stack([x**a, x], -1)
+        r = f - phi @ np.linalg.lstsq(phi, f, rcond=None)[0]
+        if float(r @ r) < best:
+            best, alpha = float(r @ r), float(a)
+    return alpha
 
 
 class SpeedNonlinearity(AbstractEffect):
-    """`+ c·(|v_m| / v_max)^α`: friction heat that grows faster than linearly with speed."""
+    """`+ c2·x² + c3·x³`, `x = |v_m| / v_max`: friction heat growing faster than linearly
+    with speed (the nominal model holds the linear term).
+
+    A polynomial rather than a free power law `c·x^α`: linear in its parameters, so the
+    calibration cannot run off to `α → ∞` (where `x^α` is an indicator of the top speed
+    and its gradient vanishes); on `[0, 1]` it matches `x^α + linear` for `α` in 1.2-3 to
+    better than 1 % of the range. The report gives the equivalent `α`."""
 
     name: ClassVar[str] = "speed_nonlinearity"
-    size: Float[Array, 1]  # [K]
-    alpha: Any  # exponent [-], positive
-    scale: float = eqx.field(static=True)  # v_max [rpm] of the calibration data
+    size: Float[Array, 2]  # c2, c3 [K]
+    scale: Any  # v_max [rpm] of the calibration data; never calibrated
 
     def contribution(self, d, nominal):
         x = jnp.abs(d["v_m"]) / self.scale
-        safe = jnp.where(x > 0, x, 1.0)
-        return self.size[0] * jnp.where(x > 0, jnp.exp(self.alpha * jnp.log(safe)), 0.0)
+        return self.size[0] * x**2 + self.size[1] * x**3
 
     def constrained(self):
-        return eqx.tree_at(lambda e: e.alpha, self, replace_fn=_positive)
+        return eqx.tree_at(lambda e: e.scale, self, replace_fn=fixed)
 
     def parameters(self):
-        return {"c_nonlinear": _f(self.size[0]), "alpha": _f(self.alpha), "v_max": self.scale}
+        c2, c3 = (float(c) for c in np.asarray(self.size))
+        return {
+            "c2": c2,
+            "c3": c3,
+            "alpha_equivalent": equivalent_exponent(c2, c3),
+            "v_max": _f(self.scale),
+        }
 
 
 # ------------------------------------------------------------------------------ templates
@@ -207,16 +249,16 @@ def _t_dynamics(ctx: Context) -> list[AbstractEffect]:
 
 
 def _t_ambient(ctx: Context) -> list[AbstractEffect]:
-    return [AmbientTemperature(jnp.zeros(1), _min_of(ctx, "T_air"))]
+    return [AmbientTemperature(jnp.zeros(1), jnp.asarray(_min_of(ctx, "T_air")))]
 
 
 def _t_coolant(ctx: Context) -> list[AbstractEffect]:
-    return [CoolantTemperature(jnp.zeros(1), _min_of(ctx, "T_water"))]
+    return [CoolantTemperature(jnp.zeros(1), jnp.asarray(_min_of(ctx, "T_water")))]
 
 
 def _t_speed(ctx: Context) -> list[AbstractEffect]:
     vmax = max(float(np.max(np.abs(e.arrays["v_m"]))) for e in ctx.experiments)
-    return [SpeedNonlinearity(jnp.zeros(1), jnp.asarray(a), vmax) for a in (1.5, 2.0, 3.0)]
+    return [SpeedNonlinearity(jnp.zeros(2), jnp.asarray(vmax))]
 
 
 def _varies(key: str, what: str):
@@ -286,7 +328,8 @@ class ThermalFamily(AbstractFamily):
         smoothing = float(self.options.get("smoothing_s", 60.0))
         if smoothing < 0:
             raise ValueError(
-                f"diagnose(thermal): smoothing_s must be >= 0 [s] (0: no smoothing); got {smoothing}."
+                "diagnose(thermal): smoothing_s must be >= 0 [s] (0: no smoothing); got "
+                f"{smoothing}."
             )
         arrays: dict[str, np.ndarray] = {}
         for key in _INPUTS:
@@ -362,20 +405,35 @@ class ThermalFamily(AbstractFamily):
                 "spindle warms up or cools down."
             )
         use_speed = "v_m" not in self._absent
-        bias_c = float(tc.min())
-        cols = [np.ones(tc.size), tc - bias_c]
-        bias_v = None
+        v = np.concatenate([e.arrays["v_m"] for e in experiments])
+        if use_speed and float(np.ptp(v)) <= 0:
+            use_speed = False
+        # the study's biases: each input's minimum over the calibration data (eq. 2-3)
+        self._bias = {"T_chassis": float(tc.min()), "v_m": float(v.min()) if use_speed else 0.0}
+        cols = [np.ones(tc.size), tc - self._bias["T_chassis"]]
         if use_speed:
-            v = np.concatenate([e.arrays["v_m"] for e in experiments])
-            bias_v = float(v.min())
-            if float(np.ptp(v)) > 0:
-                cols.append(v - bias_v)
-            else:
-                use_speed, bias_v = False, None
+            cols.append(v - self._bias["v_m"])
         phi = np.stack(cols, -1)
         y = np.concatenate([e.y for e in experiments])
         th, *_ = np.linalg.lstsq(phi, y, rcond=None)
-        return StaticRegression(jnp.asarray(th), bias_c, bias_v)
+        # fold the biases into the intercept (see StaticRegression)
+        th[0] -= th[1] * self._bias["T_chassis"] + (th[2] * self._bias["v_m"] if use_speed else 0.0)
+        return StaticRegression(jnp.asarray(th), use_speed)
+
+    def nominal_parameters(self, model) -> dict[str, float]:
+        """The regression in the study's bias-free form: `c0`, `c_chassis`, `c_speed` and
+        the biases `bias_chassis` [°C], `bias_speed` [rpm] of the calibration data."""
+        p = unwrap(model.nominal).parameters()
+        bias = getattr(self, "_bias", {"T_chassis": 0.0, "v_m": 0.0})
+        out = {"c0": p["intercept"] + p["c_chassis"] * bias["T_chassis"]}
+        out["c_chassis"] = p["c_chassis"]
+        if "c_speed" in p:
+            out["c0"] += p["c_speed"] * bias["v_m"]
+            out["c_speed"] = p["c_speed"]
+        out["bias_chassis"] = bias["T_chassis"]
+        if "c_speed" in p:
+            out["bias_speed"] = bias["v_m"]
+        return out
 
     def library(self) -> list[EffectSpec]:
         return [
@@ -407,7 +465,7 @@ class ThermalFamily(AbstractFamily):
                 ("v_m",),
                 _t_speed,
                 testable=_needs_speed_levels,
-                signature="(|v_m| / v_max)^α",
+                signature="(|v_m| / v_max)², (|v_m| / v_max)³",
                 description="friction heat growing faster than linearly with speed",
             ),
         ]

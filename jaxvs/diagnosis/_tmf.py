@@ -18,12 +18,17 @@ assumed at rest there).
 Each candidate effect is a differentiable augmentation that equals the nominal model when
 its size (or delay) is zero:
 
-| effect | augmentation of the predicted `x_t` |
-|---|---|
-| `position_dependence` | every TMF parameter linear in `(y − ȳ)`: `θ(y) = θ₀ + (y − ȳ)/h · Δθ`, `size = Δθ` |
-| `missing_mode` | `+ (r₁ ω s + r₀ ω²) / (s² + 2ζωs + ω²) · x_e`, a mode in parallel, `size = (r₀, r₁)`; `ω` seeded at the residual-spectrum peaks |
-| `sensor_delay` | the prediction delayed by `τ` (`x_t` recorded late), fractional by Lanczos interpolation |
-| `process_force` | `+ g · N(s) / A(s) · f`: the compliance between the measured process force and the TCP relative to the encoder, with the structure's own poles `A(s)` (those of the nominal TMF) and a free numerator, `size = N` |
+Augmentations of the predicted `x_t`:
+
+- `position_dependence`: the TMF coefficients linear in the other axis' position,
+  `B(σ; y) = B₀ + x·ΔB`, `A(σ; y) = A₀ + x·ΔA`, `x = (y − ȳ)/h`; `size = (ΔB, ΔA)`.
+- `missing_mode`: `+ (r₁ ω s + r₀ ω²) / (s² + 2ζωs + ω²) · x_e`, a mode in parallel,
+  `size = (r₀, r₁)`; `ω` seeded at the peaks of the residual spectrum.
+- `sensor_delay`: the prediction delayed by `τ` (`x_t` recorded late), fractional by a
+  band-limited (FFT phase) shift.
+- `process_force`: `+ g · N(σ) / A(σ) · f`, the compliance between the measured process
+  force and the tool relative to the encoder, with the structure's own poles (those of
+  the nominal TMF, `A`) and a free numerator, `size = N`.
 """
 
 from __future__ import annotations
@@ -39,7 +44,7 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
-from ..calibration import fit_rational
+from ..calibration import fit_rational, fixed
 from ..calibration._parametrise import Positive
 from ..data import Record
 from ..models import RationalTF
@@ -214,7 +219,12 @@ class StableTMF(eqx.Module):
         (the leading denominator coefficient stays 1); poles by Durand–Kerner from the
         nominal ones."""
         den = self.scaled_denominator() + jnp.concatenate([jnp.zeros((1,), dden.dtype), dden])
-        p = polish_roots(den, self.scaled_poles())
+        p0 = self.scaled_poles()
+        p = polish_roots(den, p0)
+        # keep every iterate finite and stable: right-half-plane roots are reflected (pole
+        # flipping), a failed root polish falls back to the nominal poles
+        p = jnp.where(jnp.real(p) > 0, -jnp.conj(p), p)
+        p = jnp.where(jnp.all(jnp.isfinite(p)), p, p0)
         d, r = partial_fractions(self.num + dnum, p)
         return simulate_modal(d, r * self.w0, p * self.w0, u, self.dt)
 
@@ -290,8 +300,11 @@ class PositionDependence(AbstractEffect):
 
     name: ClassVar[str] = "position_dependence"
     size: Float[Array, " p"]  # (ΔB (order + 1), ΔA (order)) per half-range, scaled σ
-    centre: float = eqx.field(static=True)
-    half_range: float = eqx.field(static=True)
+    centre: Any  # ȳ [m]; never calibrated
+    half_range: Any  # h [m]; never calibrated
+
+    def constrained(self):
+        return eqx.tree_at(lambda e: (e.centre, e.half_range), self, replace_fn=fixed)
 
     def contribution(self, d, nominal):
         x = (d["pos_y"][0] - self.centre) / self.half_range
@@ -305,8 +318,8 @@ class PositionDependence(AbstractEffect):
     def parameters(self):
         s = np.asarray(self.size)
         return {
-            "y_centre": self.centre,
-            "y_half_range": self.half_range,
+            "y_centre": _f(self.centre),
+            "y_half_range": _f(self.half_range),
             "numerator_slope_norm": float(np.linalg.norm(s[: (s.size + 1) // 2])),
             "denominator_slope_norm": float(np.linalg.norm(s[(s.size + 1) // 2 :])),
         }
@@ -330,6 +343,12 @@ class MissingMode(AbstractEffect):
     def constrained(self):
         return eqx.tree_at(lambda e: (e.omega, e.zeta), self, replace_fn=_positive)
 
+    def physical(self) -> bool:
+        """A mode is a resonance inside the sampled band: `ζ < 0.4` and `f < 0.45 fs`.
+        (A heavily damped "mode" above the band only bends the phase, as a delay does.)"""
+        f = _f(self.omega) / (2 * math.pi)
+        return bool(_f(self.zeta) < 0.4 and f < 0.45 / self.dt)
+
     def parameters(self):
         s = np.asarray(self.size)
         return {
@@ -346,32 +365,15 @@ def _exact_zero_at(cond: Array, e: Array) -> Array:
     return e - jnp.where(cond, jax.lax.stop_gradient(e), 0.0)
 
 
-def lanczos_delay(
-    y: Float[Array, " n"], delay: Float[Array, ""], a: int = 8, max_shift: int = 256
-) -> Float[Array, " n"]:
-    """`y` delayed by `delay` samples (any real number), by Lanczos interpolation.
-
-    `y_d[k] = Σ_j L(p − j) y[j]`, `p = k − delay`, over the `2a` samples around `p`, with
-    the kernel `L(x) = sinc(x) sinc(x/a)` normalised to unit sum; samples before the
-    start or after the end repeat the first or last one, and shifts beyond `max_shift`
-    samples saturate. Exactly `y` at zero delay. Each tap is one contiguous dynamic slice
-    of the padded signal (no gather).
-    """
+def fft_delay(y: Float[Array, " n"], delay: Float[Array, ""]) -> Float[Array, " n"]:
+    """`y` delayed by `delay` samples (any real number), band-limited: the phase of the
+    spectrum of the even extension `[y, reversed y]` (continuous at both joints, so no
+    ringing from the ends) is turned by `e^{−iωτ}`. Exactly `y` at zero delay."""
     n = y.shape[0]
-    m = jnp.floor(delay)
-    u = 1.0 - (delay - m)  # p = (k − m − 1) + u, u in (0, 1]
-    pad = max_shift + a
-    ypad = jnp.concatenate([jnp.full((pad,), y[0]), y, jnp.full((pad,), y[-1])])
-    shift = jnp.clip(m.astype(jnp.int32), -max_shift, max_shift)
-    out = jnp.zeros_like(y)
-    wsum = 0.0
-    for j in range(-a + 1, a + 1):
-        x = j - u
-        w = jnp.sinc(x) * jnp.sinc(x / a)
-        start = pad - shift - 1 + j
-        out = out + w * jax.lax.dynamic_slice(ypad, (start,), (n,))
-        wsum = wsum + w
-    return y + _exact_zero_at(delay == 0, out / wsum - y)
+    ext = jnp.concatenate([y, y[::-1]])
+    freq = jnp.fft.rfftfreq(2 * n)
+    out = jnp.fft.irfft(jnp.fft.rfft(ext) * jnp.exp(-2j * jnp.pi * freq * delay), 2 * n)[:n]
+    return y + _exact_zero_at(delay == 0, out - y)
 
 
 class SensorDelay(AbstractEffect):
@@ -382,7 +384,7 @@ class SensorDelay(AbstractEffect):
     dt: float = eqx.field(static=True)
 
     def apply(self, y, d, nominal):
-        return lanczos_delay(y, self.tau / self.dt)
+        return fft_delay(y, self.tau / self.dt)
 
     def order(self) -> int:
         return 1
@@ -392,20 +394,31 @@ class SensorDelay(AbstractEffect):
 
 
 class ProcessForce(AbstractEffect):
-    """The measured process force `f` moves the TCP relative to the encoder through a
-    compliance with the structure's poles: `+ g · N(σ) / A(σ) · f` (`A` of the nominal)."""
+    """The measured process force `f` moves the tool relative to the encoder through a
+    compliance with the structure's poles: `+ g·A(0)·N(σ) / A(σ) · f`, `A` the nominal
+    TMF's denominator, `N(σ) = Σ b_i σ^i` the size; the static compliance is `g·b₀` [m/N].
+
+    The same poles as the TMF are exact for a lumped structure: `x_t − T x_e =
+    (G_tf − T G_ef) f`, and by the Desnanot–Jacobi identity the numerator of this
+    difference of compliances is divisible by the full characteristic polynomial, leaving
+    the TMF's denominator (the structure with the encoder held)."""
 
     name: ClassVar[str] = "process_force"
-    size: Float[Array, " n1"]  # numerator N(σ), scaled by g
-    gain: float = eqx.field(static=True)  # [m/N] scale: RMS(x_t) / RMS(f)
+    size: Float[Array, " n1"]  # N(σ), highest power first, in units of g
+    gain: Any  # g [m/N] = RMS(x_t) / RMS(f) of the calibration data; never calibrated
 
     def contribution(self, d, nominal):
-        return nominal.simulate(d["f"], num=self.gain * self.size)
+        a0 = nominal.scaled_denominator()[-1]
+        return nominal.simulate(d["f"], num=self.gain * a0 * self.size)
+
+    def constrained(self):
+        return eqx.tree_at(lambda e: e.gain, self, replace_fn=fixed)
 
     def parameters(self):
-        out = {"gain_m_per_N": self.gain}
-        for i, b in enumerate(np.asarray(self.size)[::-1]):
-            out[f"b{i}"] = float(b)  # coefficient of σ^i, σ = s / w0
+        b = np.asarray(self.size)
+        out = {"static_compliance_m_per_N": _f(self.gain) * float(b[-1])}
+        for i, bi in enumerate(b[::-1][1:], start=1):
+            out[f"b{i}"] = float(bi)  # coefficient of σ^i (σ = s / w0), in units of g
         return out
 
 
@@ -423,10 +436,14 @@ def _residual_peaks(ctx: Context, k: int) -> list[float]:
         p_sum = p if p_sum is None else p_sum + p
     band = (f > 2 * fs / 1024) & (f < 0.45 * fs)
     peaks, props = ss.find_peaks(np.where(band, p_sum, 0.0), prominence=0)
-    if not peaks.size:
-        return [fs / 5]
-    top = peaks[np.argsort(props["prominences"])[::-1][:k]]
-    return [float(f[i]) for i in top]
+    top = [float(f[i]) for i in peaks[np.argsort(props["prominences"])[::-1][:k]]]
+    # always k starting points (one compilation): fill with frequencies spread over the band
+    fill = [
+        float(x)
+        for x in np.geomspace(0.05 * fs, 0.4 * fs, k + 2)
+        if all(abs(x - t) > 0.02 * fs for t in top)
+    ]
+    return (top + fill)[:k]
 
 
 def _t_position(ctx: Context) -> list[AbstractEffect]:
@@ -434,7 +451,9 @@ def _t_position(ctx: Context) -> list[AbstractEffect]:
     lo, hi = float(ys.min()), float(ys.max())
     half = max((hi - lo) / 2, 1e-12)
     n1 = int(ctx.model.nominal.num.shape[0])
-    return [PositionDependence(jnp.zeros(2 * n1 - 1), (lo + hi) / 2, half)]
+    return [
+        PositionDependence(jnp.zeros(2 * n1 - 1), jnp.asarray((lo + hi) / 2), jnp.asarray(half))
+    ]
 
 
 def _t_mode(ctx: Context) -> list[AbstractEffect]:
@@ -459,7 +478,7 @@ def _t_force(ctx: Context) -> list[AbstractEffect]:
         return []
     gain = float(np.sqrt(np.mean(xt**2))) / fr
     n1 = int(ctx.model.nominal.num.shape[0])
-    return [ProcessForce(jnp.zeros(n1), gain)]
+    return [ProcessForce(jnp.zeros(n1), jnp.asarray(gain))]
 
 
 def _needs_positions(experiments: Sequence[Experiment]) -> str | None:
@@ -633,7 +652,10 @@ class TMFFamily(AbstractFamily):
             den = np.real(np.poly(poles))
             num = den.copy()
             tf = RationalTF(num, den)
-        return StableTMF.from_rational(tf, w0, dt)
+        # the frequency scale only conditions the coefficients: a power of two keeps the
+        # model's structure (a static field) the same across data sets, one compilation
+        w0_q = float(2.0 ** round(math.log2(w0)))
+        return StableTMF.from_rational(tf, w0_q, dt)
 
     def library(self) -> list[EffectSpec]:
         return [
