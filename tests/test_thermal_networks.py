@@ -11,6 +11,7 @@ import scipy.stats as st
 
 from jaxvs.calibration import (
     ExcitationWarning,
+    ExtrapolationWarning,
     NoOperatingPointChangeWarning,
     correlation_matrix,
     fit_regression,
@@ -155,8 +156,18 @@ def test_split_warns_without_operating_point_change():
     with pytest.warns(NoOperatingPointChangeWarning, match="no change"):
         train, test = split_train_test(rec, 0.7)
     assert len(train) == 700 and len(test) == 300
-    v2 = np.where(t < 4000, 1000.0, 4000.0)
-    split_train_test(Record({"v_m": v2, "T": v2}, dt=5.0), 0.7)  # no warning
+    # test speeds inside the training range: no warning
+    v2 = np.where((t < 1000) | (t > 3700), 1000.0, 4000.0)
+    split_train_test(Record({"v_m": v2, "T": v2}, dt=5.0), 0.7)
+    # a test block at a speed (and temperature) never trained on: extrapolation warned
+    v3 = np.where(t < 4000, 1000.0, 4000.0)
+    rec3 = Record({"v_m": v3, "T": 20 + v3 / 1000 + t / 5000}, dt=5.0)
+    with pytest.warns(ExtrapolationWarning, match=r"v_m reaches \[1000, 4000\]"):
+        split_train_test(rec3, 0.7)
+    with pytest.warns(ExtrapolationWarning, match="T reaches"):
+        split_train_test(rec3, 0.7, inputs=["T"])
+    with pytest.raises(ValueError, match="no input 'T_chassis'"):
+        split_train_test(rec3, 0.7, inputs=["T_chassis"])
 
 
 def test_correlation_and_ranking():
@@ -210,6 +221,35 @@ def test_perceptron_closed_form_jacobian_matches_jacfwd():
     theta, unravel = ravel_pytree(params)
     Jf = jax.jacfwd(lambda th: jax.vmap(eqx.combine(unravel(th), static))(X))(theta)
     np.testing.assert_allclose(p.jacobian(X), Jf, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("n, chunk", [(40, 7), (257, 256), (100, 1000)])
+def test_structured_normal_equations_match_jacobian(n, chunk):
+    """`Perceptron.normal_equations` (Kronecker/triangle structure, chunked, J never formed)
+    equals JᵀJ and Jᵀe of the closed-form Jacobian to rounding, for chunk sizes that do
+    and do not divide the sample count; float32 accumulation to ~1e-6 relative."""
+    p = Perceptron(6, 5, key=jr.key(14))
+    X = jr.uniform(jr.key(15), (n, 6), minval=-1.0, maxval=1.0)
+    e = jr.normal(jr.key(16), (n,))
+    J = p.jacobian(X)
+    G, g = p.normal_equations(X, e, chunk=chunk)
+    np.testing.assert_allclose(G, J.T @ J, rtol=1e-12, atol=1e-12 * float(jnp.abs(J.T @ J).max()))
+    np.testing.assert_allclose(g, J.T @ e, rtol=1e-12, atol=1e-12 * float(jnp.abs(J.T @ e).max()))
+    G32, _ = p.normal_equations(X, e, chunk=chunk, dtype=jnp.float32)
+    assert G32.dtype == X.dtype
+    assert float(jnp.abs(G32 - J.T @ J).max()) < 1e-6 * float(jnp.abs(J.T @ J).max())
+
+
+def test_adam_history_is_the_mse_after_each_epoch():
+    """`train_mse[i]` is the training MSE after i Adam epochs: without a validation block
+    the returned model is the last epoch's, so its MSE is the last entry."""
+    u, y = _teacher_data()
+    net = TimeDelayNetwork(2, 5, (0, 1, 2), key=jr.key(17))
+    r = train_adam(net, u, y, epochs=30, learning_rate=1e-2)
+    assert int(r.epochs) == 30 and r.train_mse.shape == (31,)
+    mse = float(jnp.mean((r.model(jnp.asarray(u)) - jnp.asarray(y)) ** 2))
+    np.testing.assert_allclose(float(r.train_mse[30]), mse, rtol=1e-10)
+    assert float(r.train_mse[30]) < float(r.train_mse[0])
 
 
 def test_float32_gram_trains_like_float64():

@@ -36,6 +36,7 @@ from ._lscf import (
     stabilisation_diagram as stabilisation_diagram,
 )
 from ._metrics import (
+    ExtrapolationWarning as ExtrapolationWarning,
     NoOperatingPointChangeWarning as NoOperatingPointChangeWarning,
     ResidualAnalysis as ResidualAnalysis,
     mapd as mapd,
@@ -100,6 +101,7 @@ from ._tmf import (
     family_error as family_error,
     tmf_family as tmf_family,
     tmf_from_accelerations as tmf_from_accelerations,
+    tmf_from_hammer as tmf_from_hammer,
     tmf_from_impacts as tmf_from_impacts,
     tmf_from_time_domain as tmf_from_time_domain,
 )

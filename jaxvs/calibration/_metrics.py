@@ -6,6 +6,7 @@ Host-side evaluation (NumPy/SciPy): these run once per trained model on its pred
 
 import math
 import warnings
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -29,6 +30,12 @@ __all__ = [
 class NoOperatingPointChangeWarning(UserWarning):
     """The test block holds a single operating point: it cannot show how a model handles
     operating-point changes (the study notes its test set had none, §4)."""
+
+
+class ExtrapolationWarning(UserWarning):
+    """The test block leaves the range of the training block: data-driven models
+    (networks in particular) extrapolate there, and the test figures judge that
+    extrapolation rather than the model's fit."""
 
 
 def _pair(y, y_hat, where: str) -> tuple[np.ndarray, np.ndarray]:
@@ -81,6 +88,8 @@ def split_train_test(
     *,
     operating_point: str | None = "v_m",
     min_change: float = 0.05,
+    inputs: Sequence[str] | None = None,
+    max_extrapolation: float = 0.05,
 ) -> tuple[Record, Record]:
     """The study's cross-validation split: the first `fraction` of the record (training
     and validation) and the rest (test), as contiguous blocks.
@@ -93,11 +102,16 @@ def split_train_test(
       skips the check.
     - `min_change`: a change of the operating point counts when the signal's range in the
       test block exceeds this fraction of its range over the whole record.
+    - `inputs`: the model inputs to check for extrapolation (default: the operating point
+      only); `max_extrapolation`: the share of a signal's training range by which the test
+      block may leave it.
 
     **Returns:** `(train, test)` Records.
 
     **Warns:** [`NoOperatingPointChangeWarning`][] when the test block has no operating-point
-    change (its figures then say little about dynamic behaviour).
+    change (its figures then say little about dynamic behaviour);
+    [`ExtrapolationWarning`][] when a checked input leaves its training range in the test
+    block by more than `max_extrapolation` (the figures then judge extrapolation).
     """
     if not 0 < fraction < 1:
         raise ValueError(f"split_train_test: fraction must lie in (0, 1); got {fraction}.")
@@ -120,6 +134,38 @@ def split_train_test(
                 NoOperatingPointChangeWarning,
                 stacklevel=2,
             )
+    checked = (
+        list(inputs) if inputs is not None else [operating_point] * (operating_point is not None)
+    )
+    outside = []
+    for name in checked:
+        if name not in record:
+            raise ValueError(
+                f"split_train_test: the record has no input {name!r} (it has {list(record.names)})."
+            )
+        lo, hi = float(np.min(train[name])), float(np.max(train[name]))
+        t_lo, t_hi = float(np.min(test[name])), float(np.max(test[name]))
+        beyond = max(lo - t_lo, t_hi - hi, 0.0)
+        if beyond > max_extrapolation * (hi - lo):
+            share = (
+                f"{100 * beyond / (hi - lo):.0f} % of its range"
+                if hi > lo
+                else "a single value in training"
+            )
+            outside.append(
+                f"{name} reaches [{t_lo:.4g}, {t_hi:.4g}] against [{lo:.4g}, {hi:.4g}] in "
+                f"training ({share})"
+            )
+    if outside:
+        warnings.warn(
+            "split_train_test: the test block leaves the training range: "
+            + "; ".join(outside)
+            + ". Networks extrapolate there (tanh units saturate), so their test errors "
+            "judge extrapolation. Move the split, train on a record that covers these "
+            "operating points, or test on another experiment.",
+            ExtrapolationWarning,
+            stacklevel=2,
+        )
     return train, test
 
 

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..calibration import fixed, unwrap
+from ..calibration import unwrap
 from ..data import Record
 
 __all__ = ["AbstractEffect", "AbstractFamily", "EffectSpec", "Experiment", "GapModel"]
@@ -132,40 +132,28 @@ class AbstractEffect(eqx.Module):
 
 
 class GapModel(eqx.Module):
-    """Nominal model plus effects: `y = T_k(... (nominal + Σ g_i·add_i) ...)`.
+    """Nominal model plus effects, applied in their `order()`:
+    `y = T_k(... T_1(nominal) ...)`, each `T_i` exactly the identity at zero size.
 
-    With `gates` (one 0/1 value per effect, never calibrated), effect `i` acts only where
-    `g_i = 1`: the engine keeps every effect of the library in one model of fixed
-    structure and switches them by data, so one compilation serves every candidate of
-    every round. Without gates every effect acts.
+    The engine recalibrates one model structure per candidate (all its starting shapes
+    vmapped in one call), so effects are composed, never switched by data.
     """
 
     nominal: eqx.Module
     effects: tuple[AbstractEffect, ...] = ()
-    gates: Any = None
 
     def __call__(self, arrays: Mapping[str, Array]) -> Float[Array, " n"]:
         y = self.nominal(arrays)
-        order = sorted(range(len(self.effects)), key=lambda i: self.effects[i].order())
-        for i in order:
-            new = self.effects[i].apply(y, arrays, self.nominal)
-            y = new if self.gates is None else y + self.gates[i] * (new - y)
+        for effect in sorted(self.effects, key=lambda e: e.order()):
+            y = effect.apply(y, arrays, self.nominal)
         return y
 
     @property
     def effect_names(self) -> tuple[str, ...]:
         return tuple(e.name for e in self.effects)
 
-    def active(self) -> GapModel:
-        """The model with only its switched-on effects (and no gates)."""
-        if self.gates is None:
-            return self
-        g = np.asarray(self.gates).reshape(-1)
-        return GapModel(self.nominal, tuple(e for e, on in zip(self.effects, g) if on > 0.5))
-
     def constrained(self) -> GapModel:
-        gates = None if self.gates is None else fixed(self.gates)
-        return GapModel(self.nominal, tuple(e.constrained() for e in self.effects), gates)
+        return GapModel(self.nominal, tuple(e.constrained() for e in self.effects))
 
     def with_effect(self, effect: AbstractEffect, replaces: str | None = None) -> GapModel:
         effects = tuple(e for e in self.effects if e.name != replaces)

@@ -102,8 +102,8 @@ def diagnose(
     - `n_boot`: bootstrap resamples (default 300).
     - `seed`: seed of the bootstrap and the gap-map permutations.
     - `progress`: print progress to stderr.
-    - `**options`: family options (drive: `cutoff_hz`, `decimation`, `friction_sharpness`, `zoh_force`;
-        tmf: `order`; thermal: see the family).
+    - `**options`: family options (drive: `cutoff_hz`, `decimation`,
+      `friction_sharpness`, `zoh_force`; tmf: `order`; thermal: see the family).
 
     **Returns:**
 

@@ -633,15 +633,15 @@ def _drive_masks(v: np.ndarray, vmax: float, dt: float) -> dict[str, np.ndarray]
     thr = 0.02 * vmax
     low = np.abs(v) < 0.1 * vmax
     sign = np.sign(v)
-    rev = np.zeros(v.size, bool)
-    edges = np.flatnonzero(np.diff(low.astype(int)))
-    starts = np.concatenate([[0], edges + 1])
-    ends = np.concatenate([edges + 1, [v.size]])
-    for a, b in zip(starts, ends):
-        if not low[a] or a == 0 or b >= v.size:
-            continue
-        if sign[a - 1] * sign[b] < 0:
-            rev[a:b] = True
+    # runs of constant `low`; a low run is a reversal when the motion before and after it
+    # has opposite signs (runs touching the record's ends are not)
+    edges = np.flatnonzero(np.diff(low.astype(int))) + 1
+    starts = np.concatenate([[0], edges])
+    ends = np.concatenate([edges, [v.size]])
+    inner = (starts > 0) & (ends < v.size)
+    before = sign[np.maximum(starts - 1, 0)]
+    after = sign[np.minimum(ends, v.size - 1)]
+    rev = np.repeat(low[starts] & inner & (before * after < 0), ends - starts)
     return {
         "velocity reversals": rev,
         "standstill": (np.abs(v) < thr) & ~rev,

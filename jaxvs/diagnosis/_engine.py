@@ -77,15 +77,15 @@ def _unstack(values, experiments: Sequence[Experiment]) -> list[np.ndarray]:
 
 
 def n_free(model: GapModel) -> int:
-    """Free parameters of the switched-on part of a model."""
-    cm = model.active().constrained()
+    """Free parameters of a model (nominal and effects)."""
+    cm = model.constrained()
     leaves = jax.tree_util.tree_leaves(eqx.filter(cm, free_spec(cm)))
     return int(sum(np.size(x) for x in leaves))
 
 
 def _dof(model: GapModel, experiments: Sequence[Experiment]) -> int:
     arrays = [e.arrays for e in experiments]
-    return n_free(model) + sum(e.extra_dof(arrays) for e in model.active().effects)
+    return n_free(model) + sum(e.extra_dof(arrays) for e in model.effects)
 
 
 def _stack_models(models: Sequence[GapModel]) -> GapModel:
