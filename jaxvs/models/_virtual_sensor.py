@@ -45,7 +45,12 @@ class VirtualSensor(eqx.Module):
       the TCP (eq. 5); give both or neither.
     - `method`: time stepping at the encoder rate: `"euler"` or `"heun"` (the study's
       real-time integrators), `"zoh"` (exact for inputs held over each sample) or
-      `"tustin"`.
+      `"tustin"`. Match it to how the TMF was identified: a continuous TMF fitted in the
+      frequency domain (accelerometer or impact routes) wants `"tustin"` or sub-stepped
+      `"heun"`, since the encoder signal is not held between samples (`"zoh"` then adds
+      half a sample of delay, which at a 1 kHz encoder rate can cost more than the
+      deflection it estimates); a TMF calibrated by simulation error with `"zoh"` (the
+      time-domain route) wants `"zoh"`, which reproduces its calibration exactly.
     - `substeps`: integration steps per encoder sample (static, >= 1); the encoder
       signal is linearly interpolated between samples. Explicit Euler/Heun need
       `dt/substeps · |λ|` small for every pole `λ` (e.g. `substeps >= 8` for 200 Hz
