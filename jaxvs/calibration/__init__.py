@@ -101,9 +101,11 @@ from ._tmf import (
     family_error as family_error,
     tmf_family as tmf_family,
     tmf_from_accelerations as tmf_from_accelerations,
+    tmf_from_frfs as tmf_from_frfs,
     tmf_from_hammer as tmf_from_hammer,
     tmf_from_impacts as tmf_from_impacts,
     tmf_from_time_domain as tmf_from_time_domain,
+    with_static_gain as with_static_gain,
 )
 from ._train import (
     STOP_REASONS as STOP_REASONS,

@@ -181,20 +181,22 @@ def _upper_poles(omega_n: Array, zeta: Array) -> Array:
     return jax.lax.complex(-zeta * omega_n, omega_n * jnp.sqrt(1 - zeta**2))
 
 
-def _lsfd_arrays(omega, H3, W, omega_n, zeta, q: int):
+def _lsfd_arrays(omega, H3, W, omega_n, zeta, q: int, use_lower: bool = True):
     """LSFD for every FRF: real least squares in (Re A_k, Im A_k, L, U).
 
     Columns `1/(s-λ) + 1/(s-λ̄)` and `j/(s-λ) - j/(s-λ̄)` for the residue, `s^(q-2)` and
     `s^q` for the residual terms; each column is scaled to unit norm (conditioning
-    heuristic), real and imaginary parts of the equations are stacked.
+    heuristic), real and imaginary parts of the equations are stacked. Without
+    `use_lower` the `s^(q-2)` column is left out (`L = 0`).
     """
     s = 1j * omega
     lam = _upper_poles(omega_n, zeta)
     a = 1.0 / (s[:, None] - lam[None, :])
     b = 1.0 / (s[:, None] - jnp.conj(lam)[None, :])
+    lower_col = (s ** (q - 2))[:, None] * (1.0 if use_lower else 0.0)
     basis = jnp.concatenate(
-        [a + b, 1j * (a - b), (s ** (q - 2))[:, None], (s**q)[:, None]], axis=1
-    )  # (freq, 2 m + 2)
+        [a + b, 1j * (a - b), lower_col, (s**q)[:, None]], axis=1
+    )  # (freq, 2 m + 2); an all-zero column gets a zero coefficient from lstsq
     m = omega_n.shape[0]
     F, n_out, n_in = H3.shape
     Hc = H3.reshape(F, n_out * n_in)
@@ -210,6 +212,8 @@ def _lsfd_arrays(omega, H3, W, omega_n, zeta, q: int):
         return x
 
     x = jax.vmap(one, in_axes=(1, 1))(Hc, Wc)  # (n_out n_in, 2m + 2)
+    if not use_lower:
+        x = x.at[:, 2 * m].set(0.0)
     res = (x[:, :m] + 1j * x[:, m : 2 * m]).T.reshape(m, n_out, n_in)
     lower = x[:, 2 * m].reshape(n_out, n_in)
     upper = x[:, 2 * m + 1].reshape(n_out, n_in)
@@ -236,6 +240,7 @@ def lsfd(
     unit: Literal["rad/s", "Hz"] = "rad/s",
     weights: ArrayLike | None = None,
     diagram: StabilisationDiagram | None = None,
+    lower_residual: bool = True,
 ) -> ModalFit:
     """Residues and residual terms for given poles (least-squares frequency domain).
 
@@ -253,6 +258,10 @@ def lsfd(
     - `band`, `unit`: as in [`stabilisation_diagram`][].
     - `weights`: `(freq,)` or `(freq, out)` frequency weights (default uniform).
     - `diagram`: attached to the result for reference.
+    - `lower_residual`: fit the lower residual `L` (default). `False` fixes `L = 0`: a
+      supported (grounded) structure without rigid-body motion, fitted as receptance, then
+      has a finite static compliance `H(0) = Σ_k 2 Re(-A_k / λ_k) + U` set by the modes
+      instead of a free `L / s²` term (the low-frequency physics of a TMF, `T(0) = 1`).
 
     **Returns:** a [`ModalFit`][].
     """
@@ -272,18 +281,24 @@ def lsfd(
         raise ValueError(f"{where}: omega_n must be finite and > 0 rad/s.")
     if not (np.all(np.isfinite(ze)) and np.all(ze >= 0) and np.all(ze < 1)):
         raise ValueError(f"{where}: zeta must lie in [0, 1) (underdamped modes).")
-    n_unknown = 2 * wn.shape[0] + 2
+    n_unknown = 2 * wn.shape[0] + 1 + bool(lower_residual)
     if 2 * w.shape[0] < n_unknown:
         raise ValueError(
             f"{where}: {w.shape[0]} frequency points cannot determine {wn.shape[0]} modes "
-            f"and two residual terms ({n_unknown} real unknowns per FRF); give at least "
+            f"and the residual terms ({n_unknown} real unknowns per FRF); give at least "
             f"{(n_unknown + 1) // 2} points or fewer modes."
         )
     order = np.argsort(wn)
     wn, ze = wn[order], ze[order]
     W = np.ones(h3.shape[:2]) if wt is None else wt
     res, lower, upper, err, mac, lam = _lsfd_jit(
-        jnp.asarray(w), jnp.asarray(h3), jnp.asarray(W), jnp.asarray(wn), jnp.asarray(ze), q
+        jnp.asarray(w),
+        jnp.asarray(h3),
+        jnp.asarray(W),
+        jnp.asarray(wn),
+        jnp.asarray(ze),
+        q,
+        bool(lower_residual),
     )
     m = wn.shape[0]
     model = ModalModel(jnp.asarray(wn), jnp.asarray(ze), res.reshape((m,) + io))
@@ -300,7 +315,7 @@ def lsfd(
     )
 
 
-_lsfd_jit = jax.jit(_lsfd_arrays, static_argnums=5)
+_lsfd_jit = jax.jit(_lsfd_arrays, static_argnums=(5, 6))
 
 
 def modal_fit(
@@ -317,6 +332,7 @@ def modal_fit(
     damping_tol: float = 0.05,
     mac_tol: float = 0.98,
     min_orders: int | None = None,
+    lower_residual: bool = True,
 ) -> ModalFit:
     """Modal parameters of measured FRFs: pLSCF poles, automatic selection, LSFD residues.
 
@@ -339,6 +355,8 @@ def modal_fit(
       `1 / RMS|H_o|` per output) and the residue fit (default uniform).
     - `frequency_tol`, `damping_tol`, `mac_tol`: stabilisation criteria (1 %, 5 %, 0.98).
     - `min_orders`: see [`select_poles`][].
+    - `lower_residual`: see [`lsfd`][] (`False`: `L = 0`, no rigid-body / out-of-band
+      mass line).
 
     **Returns:** a [`ModalFit`][] whose `diagram` is the stabilisation diagram.
 
@@ -369,6 +387,7 @@ def modal_fit(
         unit=unit,
         weights=weights,
         diagram=diagram,
+        lower_residual=lower_residual,
     )
 
 
@@ -401,7 +420,8 @@ class ModalTMF(eqx.Module):
         `fit.frf(j)`): over the common modal denominator `D(s)` every FRF of the fit is
         `H(s) = s^(q-2) [s^(2-q) N_modal(s) + (L + U s²) D(s)] / D(s)`, the factor
         `s^(q-2) / D(s)` cancels and `T = N_a / N_b` with numerator and denominator of
-        order `2 m + 2`. Its poles are
+        order `2 m + 2` (a common factor `s^k` is cancelled: receptance fits without
+        the lower residual give order `2 m`). Its poles are
         the zeros (anti-resonances) of `H_b`. The polynomials are built in the scaled
         variable `s / ω_0` (`ω_0` the geometric mean of the natural frequencies) to keep
         their coefficients within a few decades (conditioning heuristic).
@@ -475,7 +495,13 @@ def _tmf_coefficients(a: ModalFit, b: ModalFit, q: int) -> tuple[np.ndarray, np.
     nb = np.concatenate([np.zeros(n + 1 - nb.size), nb])
     # N(s / w0) with coefficients c_k x^(n-k): multiply both by w0^n → c_k w0^k s^(n-k).
     unscale = w0 ** np.arange(n + 1, dtype=float)
-    return na * unscale, nb * unscale
+    na, nb = na * unscale, nb * unscale
+    # A common factor s^k (exact zeros at the end of both, e.g. receptance fits without
+    # the lower residual: G(x) = x² (...)) cancels; keep T(0) finite.
+    k = 0
+    while k < n and na[n - k] == 0.0 and nb[n - k] == 0.0:
+        k += 1
+    return na[: n + 1 - k], nb[: n + 1 - k]
 
 
 def tmf_from_modal(numerator: ModalFit, denominator: ModalFit) -> ModalTMF:

@@ -2,7 +2,7 @@
 # ruff: noqa: E501  (notebook source lines are kept as they read in the notebook)
 
 import nbformat as nbf
-from nbclient import NotebookClient
+from _build import build
 
 md, code = nbf.v4.new_markdown_cell, nbf.v4.new_code_cell
 cells = [
@@ -267,10 +267,4 @@ cells = [
     ),
 ]
 
-nb = nbf.v4.new_notebook(cells=cells)
-nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
-NotebookClient(
-    nb, timeout=900, kernel_name="python3", resources={"metadata": {"path": "notebooks"}}
-).execute()
-nbf.write(nb, "notebooks/02_thermal_virtual_sensor.ipynb")
-print("written notebooks/02_thermal_virtual_sensor.ipynb")
+build(cells, "02_thermal_virtual_sensor.ipynb")

@@ -1,7 +1,7 @@
 """Generate and execute notebooks/04_axis_drives_emps.ipynb (run from the repository root)."""
 
 import nbformat as nbf
-from nbclient import NotebookClient
+from _build import build
 
 md, code = nbf.v4.new_markdown_cell, nbf.v4.new_code_cell
 cells = [
@@ -201,9 +201,4 @@ cells = [
         "display(Markdown('\\n'.join(rows)))"
     ),
 ]
-nb = nbf.v4.new_notebook(cells=cells, metadata={"kernelspec": {"name": "python3",
-                                                               "display_name": "Python 3",
-                                                               "language": "python"}})
-NotebookClient(nb, timeout=900, kernel_name="python3",
-               resources={"metadata": {"path": "notebooks"}}).execute()
-nbf.write(nb, "notebooks/04_axis_drives_emps.ipynb")
+build(cells, "04_axis_drives_emps.ipynb")

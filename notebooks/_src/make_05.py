@@ -1,7 +1,7 @@
 """Generate and execute notebooks/05_sim_to_real_gap.ipynb (run from the repository root)."""
 
 import nbformat as nbf
-from nbclient import NotebookClient
+from _build import build
 
 md, code = nbf.v4.new_markdown_cell, nbf.v4.new_code_cell
 cells = [
@@ -89,9 +89,4 @@ cells = [
         "shrink and time per case."
     ),
 ]
-nb = nbf.v4.new_notebook(cells=cells)
-nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
-NotebookClient(nb, timeout=1500, kernel_name="python3",
-               resources={"metadata": {"path": "notebooks"}}).execute()
-nbf.write(nb, "notebooks/05_sim_to_real_gap.ipynb")
-print("written notebooks/05_sim_to_real_gap.ipynb")
+build(cells, "05_sim_to_real_gap.ipynb", timeout=1500)
