@@ -16,7 +16,7 @@ demo: $(STAMP)
 	$(VENV)/bin/jaxvs demo --out demo-report
 
 test: $(STAMP)
-	$(PY) -m pytest -n 2 --dist loadgroup tests
+	$(PY) -m pytest -n 2 --dist loadgroup --max-worker-restart=0 --durations=15 tests
 	$(PY) -m pytest --nbmake notebooks -p no:randomly -o filterwarnings=
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
 

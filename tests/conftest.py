@@ -32,3 +32,18 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"real data folder {SHARED_DATA} is absent (it sits beside the repo)")
     return SHARED_DATA
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_code():
+    """Drop XLA's compiled executables after each test module.
+
+    Every compiled executable keeps a few memory mappings of JIT code; a worker that runs
+    a few hundred test functions would exceed the kernel's `vm.max_map_count` (65530 by
+    default), and XLA then crashes mid-compilation (segfault or abort). Clearing the caches
+    between modules keeps a worker's mappings to what one module needs."""
+    yield
+    import gc
+
+    jax.clear_caches()
+    gc.collect()
