@@ -33,6 +33,17 @@ def _err(model, y):
     return np.linalg.norm(G - T) / np.linalg.norm(T)
 
 
+def _h1_tmfs(d):
+    """H1 TMFs of a PRBS experiment's accelerometer pairs (all positions in one call), the
+    frequencies [Hz] and the 5-400 Hz band the 1 ms PRBS covers."""
+    est = jaxvs.signal.transmissibility(
+        d.a_tcp, d.a_encoder, 1000.0, tool_quantity="acceleration",
+        encoder_quantity="acceleration", nperseg=1024,
+    )  # fmt: skip
+    f = np.asarray(est.frequency)
+    return est, f, (f >= 5.0) & (f <= 400.0)
+
+
 def test_location_flag():
     with pytest.warns(ExcitationLocationWarning, match="excitation at the TCP"):
         assert not check_excitation_location(excitation="tcp")
@@ -121,12 +132,7 @@ def test_family_predicts_unmeasured_positions():
     the true TMF of the nearest measured position."""
     ys = np.linspace(0.0, 0.6, 5)
     d = TWIN.prbs_experiment(ys, jr.key(2), prbs_order=11, n_periods=8)
-    est = jaxvs.signal.transmissibility(
-        d.a_tcp, d.a_encoder, 1000.0, tool_quantity="acceleration",
-        encoder_quantity="acceleration", nperseg=1024,
-    )  # fmt: skip
-    f = np.asarray(est.frequency)
-    sel = (f >= 5.0) & (f <= 400.0)
+    est, f, sel = _h1_tmfs(d)
     g = np.clip(np.asarray(est.coherence)[:, sel], 0.0, 0.9999)
     with warnings.catch_warnings():
         fam, res = tmf_family(
@@ -320,12 +326,7 @@ def test_route_a_and_family_have_unit_static_gain():
     assert _err(ra.model, 0.3) < 0.03
     raw = tmf_from_accelerations(d.a_tcp[1], d.a_encoder[1], 1000.0, static_gain=None)
     assert abs(float(jaxvs.static_gain(raw.model)) - 1.0) > 1e-6  # the fit alone misses it
-    est = jaxvs.signal.transmissibility(
-        d.a_tcp, d.a_encoder, 1000.0, tool_quantity="acceleration",
-        encoder_quantity="acceleration", nperseg=1024,
-    )  # fmt: skip
-    f = np.asarray(est.frequency)
-    sel = (f >= 5.0) & (f <= 400.0)
+    est, f, sel = _h1_tmfs(d)
     fam, _ = tmf_family(2 * np.pi * f[sel], np.asarray(est.H)[:, sel], ys, degree=2)
     for y in (0.1, 0.45):
         assert abs(float(jaxvs.static_gain(fam.at(jnp.asarray(y)))) - 1.0) < 1e-12
