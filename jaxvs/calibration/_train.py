@@ -171,6 +171,21 @@ def _split(net):
     return theta, unravel, static
 
 
+def _train(impl, args) -> TrainResult:
+    """Run a compiled trainer (`_lm_impl`, `_adam_impl`) and time it."""
+    out, t_compile, t_run = timed_call(impl, *args)
+    model, train_mse, val_mse, epochs, best_epoch, stop = out
+    return TrainResult(
+        model=model,
+        train_mse=train_mse,
+        val_mse=val_mse,
+        epochs=epochs,
+        best_epoch=best_epoch,
+        stop=stop,
+        stats={"compile_time": t_compile, "run_time": t_run},
+    )
+
+
 # ----------------------------------------------------------------------------- LM
 
 
@@ -399,17 +414,7 @@ def train_lm(
         jnp.asarray(goal, f),
         None if gram_dtype is None else jnp.dtype(gram_dtype),
     )
-    out, t_compile, t_run = timed_call(_lm_impl, *args)
-    model, th, vh, epochs, best, stop = out
-    return TrainResult(
-        model=model,
-        train_mse=th,
-        val_mse=vh,
-        epochs=epochs,
-        best_epoch=best,
-        stop=stop,
-        stats={"compile_time": t_compile, "run_time": t_run},
-    )
+    return _train(_lm_impl, args)
 
 
 # ----------------------------------------------------------------------------- Adam
@@ -500,17 +505,7 @@ def train_adam(
         float(learning_rate),
         jnp.asarray(goal, f),
     )
-    out, t_compile, t_run = timed_call(_adam_impl, *args)
-    model, th, vh, k, best, stop = out
-    return TrainResult(
-        model=model,
-        train_mse=th,
-        val_mse=vh,
-        epochs=k,
-        best_epoch=best,
-        stop=stop,
-        stats={"compile_time": t_compile, "run_time": t_run},
-    )
+    return _train(_adam_impl, args)
 
 
 # ----------------------------------------------------------------------------- regression

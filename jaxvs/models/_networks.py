@@ -206,6 +206,16 @@ def _range_fields(lo, hi, n: int | None, dtype):
     return (lo + hi) / 2, jnp.where(half > 0, half, 1.0)
 
 
+def _normalisation(n_inputs: int, dtype, input_range, output_range):
+    """`(u_offset, u_scale, y_offset, y_scale)` of the `mapminmax` normalisation from the
+    `(lo, hi)` ranges of the inputs and the target (no scaling where a range is `None`)."""
+    lo, hi = (None, None) if input_range is None else input_range
+    u_offset, u_scale = _range_fields(lo, hi, n_inputs, dtype)
+    lo, hi = (None, None) if output_range is None else output_range
+    y_offset, y_scale = _range_fields(lo, hi, None, dtype)
+    return u_offset, u_scale, y_offset, y_scale
+
+
 class StaticNetwork(eqx.Module):
     """Static two-layer network: `y(k) = f(u(k))` (the study's static ANN, Fig. 7(a)).
 
@@ -234,11 +244,9 @@ class StaticNetwork(eqx.Module):
         output_range: tuple[ArrayLike, ArrayLike] | None = None,
     ):
         self.perceptron = Perceptron(n_inputs, n_hidden, key=key)
-        dtype = self.perceptron.W1.dtype
-        lo, hi = (None, None) if input_range is None else input_range
-        self.u_offset, self.u_scale = _range_fields(lo, hi, n_inputs, dtype)
-        lo, hi = (None, None) if output_range is None else output_range
-        self.y_offset, self.y_scale = _range_fields(lo, hi, None, dtype)
+        self.u_offset, self.u_scale, self.y_offset, self.y_scale = _normalisation(
+            n_inputs, self.perceptron.W1.dtype, input_range, output_range
+        )
 
     @property
     def n_inputs(self) -> int:
@@ -300,11 +308,9 @@ class TimeDelayNetwork(eqx.Module):
             )
         self.delays = delays
         self.perceptron = Perceptron(n_inputs * len(delays), n_hidden, key=key)
-        dtype = self.perceptron.W1.dtype
-        lo, hi = (None, None) if input_range is None else input_range
-        self.u_offset, self.u_scale = _range_fields(lo, hi, n_inputs, dtype)
-        lo, hi = (None, None) if output_range is None else output_range
-        self.y_offset, self.y_scale = _range_fields(lo, hi, None, dtype)
+        self.u_offset, self.u_scale, self.y_offset, self.y_scale = _normalisation(
+            n_inputs, self.perceptron.W1.dtype, input_range, output_range
+        )
 
     @property
     def n_inputs(self) -> int:
