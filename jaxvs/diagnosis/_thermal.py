@@ -96,8 +96,6 @@ def _positive(x) -> Positive:
     return Positive(jnp.log(jnp.maximum(x, 1e-12)))
 
 
-
-
 def first_order_lag(
     s: Float[Array, " n"], tau: Float[Array, ""], dt: float, y_init: Float[Array, ""] | None = None
 ) -> Float[Array, " n"]:
@@ -152,38 +150,39 @@ class Dynamics(AbstractEffect):
         return {"tau_s": _f(self.tau)}
 
 
-class AmbientTemperature(AbstractEffect):
+class _MeasuredTemperature(AbstractEffect):
+    """`+ c·(T − bias)` for a measured temperature `T` that reaches the bearing; `bias` is
+    the minimum over the calibration data and is never calibrated."""
+
+    signal: ClassVar[str]
+    suffix: ClassVar[str]
+    size: Float[Array, 1]  # [-]
+    bias: Any  # [°C]
+
+    def contribution(self, d, nominal):
+        return self.size[0] * (d[self.signal] - self.bias)
+
+    def constrained(self):
+        return eqx.tree_at(lambda e: e.bias, self, replace_fn=fixed)
+
+    def parameters(self):
+        return {f"c_{self.suffix}": _f(self.size[0]), f"bias_{self.suffix}": _f(self.bias)}
+
+
+class AmbientTemperature(_MeasuredTemperature):
     """`+ c·(T_air − bias)`: the air temperature reaches the bearing through the shaft."""
 
     name: ClassVar[str] = "ambient_temperature"
-    size: Float[Array, 1]  # [-]
-    bias: Any  # [°C], the minimum over the calibration data; never calibrated
-
-    def contribution(self, d, nominal):
-        return self.size[0] * (d["T_air"] - self.bias)
-
-    def constrained(self):
-        return eqx.tree_at(lambda e: e.bias, self, replace_fn=fixed)
-
-    def parameters(self):
-        return {"c_air": _f(self.size[0]), "bias_air": _f(self.bias)}
+    signal: ClassVar[str] = "T_air"
+    suffix: ClassVar[str] = "air"
 
 
-class CoolantTemperature(AbstractEffect):
+class CoolantTemperature(_MeasuredTemperature):
     """`+ c·(T_water − bias)`: the cooling water reaches the bearing through its jacket."""
 
     name: ClassVar[str] = "coolant_temperature"
-    size: Float[Array, 1]  # [-]
-    bias: Any  # [°C], the minimum over the calibration data; never calibrated
-
-    def contribution(self, d, nominal):
-        return self.size[0] * (d["T_water"] - self.bias)
-
-    def constrained(self):
-        return eqx.tree_at(lambda e: e.bias, self, replace_fn=fixed)
-
-    def parameters(self):
-        return {"c_water": _f(self.size[0]), "bias_water": _f(self.bias)}
+    signal: ClassVar[str] = "T_water"
+    suffix: ClassVar[str] = "water"
 
 
 def equivalent_exponent(c2: float, c3: float) -> float:
