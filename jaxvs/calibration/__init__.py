@@ -28,6 +28,14 @@ from ._idim import (
     idim_regressor as idim_regressor,
     predict_force as predict_force,
 )
+from ._lm import (
+    LMState as LMState,
+    batched_while as batched_while,
+    lm_init as lm_init,
+    lm_result as lm_result,
+    lm_running as lm_running,
+    lm_step as lm_step,
+)
 from ._lscf import (
     PoleTrack as PoleTrack,
     StabilisationDiagram as StabilisationDiagram,

@@ -34,8 +34,7 @@ import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
-from ..calibration import free_spec, unwrap
-from ..calibration._lm import lm_init, lm_running, lm_step
+from ..calibration import free_spec, lm_init, lm_running, lm_step, unwrap
 from ._base import AbstractFamily, Context, EffectSpec, Experiment, GapModel
 from ._stats import bic, block_length, gap_change_interval, nrmse
 
