@@ -31,7 +31,6 @@ import scipy.signal as ss
 jax.config.update("jax_enable_x64", True)
 
 import jaxvs  # noqa: E402
-from jaxvs.calibration import calibrate_drive, predict_force  # noqa: E402
 from jaxvs.data import load_emps  # noqa: E402
 from jaxvs.models import (  # noqa: E402
     AsymmetricFriction,
@@ -44,6 +43,7 @@ from jaxvs.models import (  # noqa: E402
     StribeckFriction,
     VelocityLoop,
 )
+from jaxvs.studies import calibrate_drive, predict_force  # noqa: E402
 
 # Description §3.5 (SimulationEMPS / SimulationEMPSValidation output), in %.
 PUBLISHED_SIMULATION = {

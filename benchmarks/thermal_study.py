@@ -34,14 +34,8 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 import jaxvs  # noqa: E402
-from jaxvs.calibration import (  # noqa: E402
-    fit_regression,
-    resample_sparse,
-    train_adam,
-    train_lm,
-    vs_metrics,
-)
 from jaxvs.models import StaticNetwork, TimeDelayNetwork  # noqa: E402
+from jaxvs.studies import fit_regression, resample_sparse, train_adam, train_lm, vs_metrics
 from jaxvs.twins import SpindleThermalTwin  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent
@@ -313,7 +307,7 @@ def main():
     )
     args = ap.parse_args()
     # the per-part fits warn about parts cut short by the record end; expected here
-    warnings.simplefilter("ignore", jaxvs.calibration.ThermalFitWarning)
+    warnings.simplefilter("ignore", jaxvs.studies.ThermalFitWarning)
     t0 = time.perf_counter()
     out = ROOT / "results"
     out.mkdir(exist_ok=True)

@@ -58,18 +58,18 @@ import numpy as np  # noqa: E402
 import scipy.signal as ss  # noqa: E402
 
 import jaxvs  # noqa: E402
-from jaxvs.calibration import (  # noqa: E402
+from jaxvs.calibration import fit_rational
+from jaxvs.data import bang_bang, swept_sine  # noqa: E402
+from jaxvs.models import OscillatorChain  # noqa: E402
+from jaxvs.signal import frf_h1, impact_windows, transmissibility  # noqa: E402
+from jaxvs.studies import (
     ExcitationLocationWarning,
     family_error,
-    fit_rational,
     tmf_family,
     tmf_from_accelerations,
     tmf_from_hammer,
     tmf_from_time_domain,
 )
-from jaxvs.data import bang_bang, swept_sine  # noqa: E402
-from jaxvs.models import OscillatorChain  # noqa: E402
-from jaxvs.signal import frf_h1, impact_windows, transmissibility  # noqa: E402
 from jaxvs.twins import MachineStructureTwin  # noqa: E402
 from jaxvs.twins._structure import DRIVE, ENCODER  # noqa: E402
 

@@ -12,6 +12,7 @@ from . import (
     diagnosis as diagnosis,
     models as models,
     signal as signal,
+    studies as studies,
 )
 from ._io import (
     FORMAT_VERSION as FORMAT_VERSION,
@@ -33,9 +34,7 @@ from .calibration import (
     calibrate_family as calibrate_family,
     calibrate_family_sharded as calibrate_family_sharded,
     family_mesh as family_mesh,
-    fit_first_order as fit_first_order,
     fit_rational as fit_rational,
-    idim_ls as idim_ls,
     modal_fit as modal_fit,
     multistart as multistart,
     shard_family as shard_family,
@@ -75,5 +74,6 @@ from .models import (
     to_scipy as to_scipy,
     zeros as zeros,
 )
+from .studies import fit_first_order as fit_first_order, idim_ls as idim_ls
 
 __version__ = "0.1.0"

@@ -36,7 +36,7 @@ def test_prediction_error_linear_model():
     assert out.residual.shape == (500 - 2,)  # the predictor needs n = 2 past samples
 
 
-class FrictionMass(eqx.Module):
+class FrictionMass(jaxvs.models.AbstractModel):
     """Nonlinear axis `m v' = u - c v - Fc tanh(v / vs)`, `q' = v`, solved by diffrax."""
 
     m: jax.Array
@@ -44,7 +44,7 @@ class FrictionMass(eqx.Module):
     Fc: jax.Array
     vs: float = 0.01
 
-    def simulate(self, u, dt):
+    def predict(self, u, dt):
         ts = dt * jnp.arange(u.shape[0])
         force = diffrax.LinearInterpolation(ts, u)
 
@@ -126,8 +126,7 @@ class FirstOrderARX(eqx.Module):
     a: jax.Array
     b: jax.Array
 
-    def predict(self, u, y, dt):
-        del dt
+    def predict_one_step(self, u, y):
         return jnp.concatenate([y[:1], self.a * y[:-1] + self.b * u[:-1]])
 
 
@@ -138,6 +137,6 @@ def test_prediction_error_user_predictor():
     for k in range(1, 300):  # independent numpy recursion
         y[k] = 0.9 * y[k - 1] + 0.5 * u[k - 1]
     guess = FirstOrderARX(jnp.asarray(0.5), jnp.asarray(1.0))
-    out = jaxvs.calibrate(guess, {"u": u, "y": y, "dt": 1.0}, PredictionError(skip=1))
+    out = jaxvs.calibrate(guess, {"u": u, "y": y, "dt": 1.0}, PredictionError(lambda m, d: m.predict_one_step(d["u"], d["y"]), skip=1))
     np.testing.assert_allclose(out.values, [0.9, 0.5], rtol=1e-10)  # linear in (a, b): exact
     assert out.residual.shape == (299,)

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxvs.calibration import ExcitationWarning, calibrate_drive
+from jaxvs.calibration import ExcitationWarning
 from jaxvs.data import Record, bang_bang
 from jaxvs.models import (
     CoulombViscousFriction,
@@ -15,6 +15,7 @@ from jaxvs.models import (
     RigidAxis,
     VelocityLoop,
 )
+from jaxvs.studies import calibrate_drive
 
 DT = 1e-3
 TRUE = {"mass": 20.0, "Fc": 8.0, "Fv": 60.0, "offset": -1.5}

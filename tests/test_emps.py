@@ -1,4 +1,4 @@
-"""IDIM-LS (`jaxvs.calibration.idim_ls`): synthetic recovery, LS oracle, bad input, and the
+"""IDIM-LS (`jaxvs.studies.idim_ls`): synthetic recovery, LS oracle, bad input, and the
 reproduction of the published EMPS results (Janot, Gautier, Brunot 2019, §3.4)."""
 
 import jax
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import jaxvs
-from jaxvs.calibration import ForcePrediction, IDIMResult, idim_ls, idim_regressor, predict_force
 from jaxvs.data import Record, load_emps
+from jaxvs.studies import ForcePrediction, IDIMResult, idim_ls, idim_regressor, predict_force
 
 DT = 1e-3
 TRUE = {"M": 95.0, "Fv": 200.0, "Fc": 20.0, "offset": -3.0}
@@ -141,7 +141,7 @@ def test_edge_trimming_matters():
 
 def test_least_squares_jit_grad():
     # The LS core is a pure JAX function: its estimate is differentiable w.r.t. the data.
-    from jaxvs.calibration._idim import _least_squares
+    from jaxvs.studies.drive._idim import _least_squares
 
     result = idim_ls(_synthetic(noise=1.0))
     phi, y = result.regressor, result.force

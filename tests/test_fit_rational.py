@@ -13,8 +13,7 @@ import scipy.optimize as opt
 import scipy.signal as sig
 
 import jaxvs
-from jaxvs.calibration import RESULTS
-from jaxvs.calibration._lm import batched_while
+from jaxvs.calibration import RESULTS, batched_while
 
 OMEGA = 2 * np.pi * np.geomspace(1.0, 1000.0, 300)  # rad/s, 1 Hz - 1 kHz
 

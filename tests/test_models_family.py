@@ -14,7 +14,7 @@ from jax.test_util import check_grads
 
 import jaxvs
 from jaxvs import GridFamily, SmoothFamily
-from jaxvs.models._family import pchip_slopes
+from jaxvs.models.lti._family import pchip_slopes
 
 _frequency_response = eqx.filter_jit(jaxvs.frequency_response)  # one compile per structure
 OMEGA = jnp.logspace(1, 4, 60)

@@ -9,14 +9,14 @@ import pytest
 import scipy.signal as sig
 
 import jaxvs
-from jaxvs.calibration import (
+from jaxvs.models import DrivenFirstOrder, FirstOrder, PiecewiseFirstOrder
+from jaxvs.studies import (
     ThermalFitWarning,
     correct_outliers,
     detect_outliers,
     fit_piecewise_first_order,
     resample_sparse,
 )
-from jaxvs.models import DrivenFirstOrder, FirstOrder, PiecewiseFirstOrder
 
 # Study Table 3 (Dementjev et al. 2014): k [°C], T0 [°C], T1 [s] of the five parts.
 TABLE3 = [

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 import scipy.stats as st
 
-from jaxvs.calibration import (
-    ExcitationWarning,
+from jaxvs.calibration import ExcitationWarning
+from jaxvs.data import Record
+from jaxvs.models import BiasFreeRegression, Perceptron, StaticNetwork, TimeDelayNetwork
+from jaxvs.studies import (
     ExtrapolationWarning,
     NoOperatingPointChangeWarning,
     correlation_matrix,
@@ -25,8 +27,6 @@ from jaxvs.calibration import (
     train_lm,
     vs_metrics,
 )
-from jaxvs.data import Record
-from jaxvs.models import BiasFreeRegression, Perceptron, StaticNetwork, TimeDelayNetwork
 
 
 def test_regression_matches_lstsq_and_study_form():
@@ -267,7 +267,8 @@ def test_joint_calibration_of_interpolation_and_tdnn():
     import warnings
 
     import jaxvs
-    from jaxvs.calibration import EquationError, fit_piecewise_first_order, positive
+    from jaxvs.calibration import EquationError, positive
+    from jaxvs.studies import fit_piecewise_first_order
     from jaxvs.twins import SpindleThermalTwin
 
     twin = SpindleThermalTwin({"dynamics": 240.0})

@@ -5,7 +5,7 @@ Data (`../shared/data/pyuff_frf`, see its README): accelerances at 0, 1, ..., 10
 the responses of points 1-3 to a force at point 1. The TMFs `T_j1 = H_j1 / H_11`
 (j = 2, 3) are identified (i) as rational TMFs fitted to the measured ratio and (ii) from
 modal fits of `H_j1` and `H_11` (shared poles, LSFD residues), both through
-`jaxvs.calibration.tmf_from_frfs`.
+`jaxvs.studies.tmf_from_frfs`.
 
 Conditioning of the ratio (measured): `H_11` has no anti-resonance in 1-1000 Hz (its
 minima between the six modes are 0.12-0.28 against a median of 0.37; it is not a driving-
@@ -23,8 +23,8 @@ import numpy as np
 import pytest
 
 import jaxvs
-from jaxvs.calibration import tmf_from_frfs
 from jaxvs.data import FRFData
+from jaxvs.studies import tmf_from_frfs
 
 ZEROS_HZ = {1: 417.0, 2: 152.0}  # anti-resonances of H_21, H_31: zeros of T_21, T_31
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxvs
-from jaxvs.calibration import (
+from jaxvs.studies import (
     ExcitationLocationWarning,
     check_excitation_location,
     family_error,
@@ -300,7 +300,7 @@ def test_route_b_on_simulated_hammer_test():
 def test_static_gain_is_imposed_on_drive_side_tmfs():
     """`with_static_gain` scales the numerator so that T(0) is exact, member by member,
     leaving the poles and the shape untouched; a pole at 0 Hz is refused."""
-    from jaxvs.calibration import with_static_gain
+    from jaxvs.studies import with_static_gain
 
     fam = jaxvs.RationalTF(
         jnp.array([[0.01, 0.5, 1.02], [0.0, 0.3, 0.97]]), jnp.array([[1.0, 0.4, 1.0]] * 2)

@@ -104,7 +104,7 @@ def test_idim_recovers_nominal_parameters(getkey):
     # u by half a sample (average of neighbours) to remove that known 0.5-sample lag.
     u = rec["u"]
     shifted = jaxvs.data.Record({"q": rec["q"][1:], "u": 0.5 * (u[1:] + u[:-1])}, dt=rec.dt)
-    est = jaxvs.calibration.idim_ls(shifted)
+    est = jaxvs.studies.idim_ls(shifted)
     # Tolerances: 1 N force noise over 25 000 samples and the 200 Hz filter; measured
     # errors are < 0.3 % (M, Fv) and < 0.1 N (offset, Fc).
     assert float(est["M"]) == pytest.approx(M, rel=0.01)

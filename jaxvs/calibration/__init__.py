@@ -1,4 +1,6 @@
-"""Calibration: fitting models to data (frequency-domain rational fits, result codes)."""
+"""Family-agnostic calibration: `calibrate`, residuals, parametrisations, covariance,
+families and sharding, one Levenberg-Marquardt, the rational and modal fitters and their
+linear initialisers (Levy, Sanathanan-Koerner, pLSCF)."""
 
 from ._calibrate import (
     CalibrationError as CalibrationError,
@@ -6,27 +8,14 @@ from ._calibrate import (
     calibrate as calibrate,
     free_spec as free_spec,
 )
-from ._drive_calibration import (
-    calibrate_drive as calibrate_drive,
-    drive_residual as drive_residual,
-)
 from ._family import (
     MultistartResult as MultistartResult,
     calibrate_family as calibrate_family,
     multistart as multistart,
 )
-from ._first_order import (
-    ThermalFitWarning as ThermalFitWarning,
-    fit_first_order as fit_first_order,
-    fit_piecewise_first_order as fit_piecewise_first_order,
-)
-from ._fit_rational import FitReport as FitReport, fit_rational as fit_rational
-from ._idim import (
-    ForcePrediction as ForcePrediction,
-    IDIMResult as IDIMResult,
-    idim_ls as idim_ls,
-    idim_regressor as idim_regressor,
-    predict_force as predict_force,
+from ._fit_rational import (
+    FitReport as FitReport,
+    fit_rational as fit_rational,
 )
 from ._lm import (
     LMState as LMState,
@@ -42,17 +31,6 @@ from ._lscf import (
     pole_tracks as pole_tracks,
     select_poles as select_poles,
     stabilisation_diagram as stabilisation_diagram,
-)
-from ._metrics import (
-    ExtrapolationWarning as ExtrapolationWarning,
-    NoOperatingPointChangeWarning as NoOperatingPointChangeWarning,
-    ResidualAnalysis as ResidualAnalysis,
-    mapd as mapd,
-    r2 as r2,
-    residual_analysis as residual_analysis,
-    rmse as rmse,
-    split_train_test as split_train_test,
-    vs_metrics as vs_metrics,
 )
 from ._modal_fit import (
     ModalFit as ModalFit,
@@ -74,11 +52,6 @@ from ._parametrise import (
     stable_denominator as stable_denominator,
     unwrap as unwrap,
 )
-from ._resample_sparse import (
-    correct_outliers as correct_outliers,
-    detect_outliers as detect_outliers,
-    resample_sparse as resample_sparse,
-)
 from ._residuals import (
     AbstractResidual as AbstractResidual,
     EquationError as EquationError,
@@ -89,11 +62,6 @@ from ._residuals import (
     SimulationError as SimulationError,
 )
 from ._results import RESULTS as RESULTS
-from ._selection import (
-    InputRank as InputRank,
-    correlation_matrix as correlation_matrix,
-    rank_inputs as rank_inputs,
-)
 from ._sharding import (
     SweepResult as SweepResult,
     calibrate_family_sharded as calibrate_family_sharded,
@@ -102,24 +70,67 @@ from ._sharding import (
     simulate_sharded as simulate_sharded,
     sweep as sweep,
 )
-from ._tmf import (
-    ExcitationLocationWarning as ExcitationLocationWarning,
-    TMFIdentification as TMFIdentification,
-    check_excitation_location as check_excitation_location,
-    family_error as family_error,
-    tmf_family as tmf_family,
-    tmf_from_accelerations as tmf_from_accelerations,
-    tmf_from_frfs as tmf_from_frfs,
-    tmf_from_hammer as tmf_from_hammer,
-    tmf_from_impacts as tmf_from_impacts,
-    tmf_from_time_domain as tmf_from_time_domain,
-    with_static_gain as with_static_gain,
+
+# Names that moved to `jaxvs.studies` (issue 13); the old path works for one release.
+_MOVED_TO_STUDIES = frozenset(
+    {
+        "ExcitationLocationWarning",
+        "ExtrapolationWarning",
+        "ForcePrediction",
+        "IDIMResult",
+        "InputRank",
+        "NoOperatingPointChangeWarning",
+        "ResidualAnalysis",
+        "STOP_REASONS",
+        "TMFIdentification",
+        "ThermalFitWarning",
+        "TrainResult",
+        "calibrate_drive",
+        "check_excitation_location",
+        "correct_outliers",
+        "correlation_matrix",
+        "detect_outliers",
+        "drive_residual",
+        "family_error",
+        "fit_first_order",
+        "fit_piecewise_first_order",
+        "fit_regression",
+        "idim_ls",
+        "idim_regressor",
+        "mapd",
+        "normalise_network",
+        "predict_force",
+        "r2",
+        "rank_inputs",
+        "resample_sparse",
+        "residual_analysis",
+        "rmse",
+        "split_train_test",
+        "tmf_family",
+        "tmf_from_accelerations",
+        "tmf_from_frfs",
+        "tmf_from_hammer",
+        "tmf_from_impacts",
+        "tmf_from_time_domain",
+        "train_adam",
+        "train_lm",
+        "vs_metrics",
+        "with_static_gain",
+    }
 )
-from ._train import (
-    STOP_REASONS as STOP_REASONS,
-    TrainResult as TrainResult,
-    fit_regression as fit_regression,
-    normalise_network as normalise_network,
-    train_adam as train_adam,
-    train_lm as train_lm,
-)
+
+
+def __getattr__(name: str):
+    if name in _MOVED_TO_STUDIES:
+        import warnings
+
+        from .. import studies
+
+        warnings.warn(
+            f"jaxvs.calibration.{name} moved to jaxvs.studies.{name}; import it from there "
+            "(the old path will be removed in the next release).",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return getattr(studies, name)
+    raise AttributeError(f"module 'jaxvs.calibration' has no attribute {name!r}")

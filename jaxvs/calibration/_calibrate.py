@@ -23,7 +23,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float, Int, PyTree
 
-from ._compile import is_traced, timed_call
+from .._misc import is_traced, timed_call
 from ._covariance import delta_method, jacobian_covariance, t_quantile
 from ._parametrise import is_parameter, unwrap
 from ._residuals import AbstractResidual, Joint

@@ -16,6 +16,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
+from .._misc import is_traced, timed_call
+from ..data import FRFData
+from ..models import AbstractFamilyLaw
 from ._calibrate import (
     _REASONS,
     CalibrationError,
@@ -26,7 +29,6 @@ from ._calibrate import (
     calibrate,
     free_spec,
 )
-from ._compile import is_traced, timed_call
 from ._parametrise import is_parameter
 from ._residuals import AbstractResidual
 from ._results import RESULTS
@@ -229,7 +231,7 @@ class _FamilyResidual(AbstractResidual):
 def _frf_family_to_list(data: Any) -> list | None:
     """A batched `FRFData` (H with leading family axes) as a list of per-position dicts."""
     batch = getattr(data, "batch_shape", None)
-    if batch is None or not hasattr(data, "H") or len(batch) != 1:
+    if not isinstance(data, FRFData) or batch is None or len(batch) != 1:
         return None
     coh = getattr(data, "coherence", None)
     out = []
@@ -345,7 +347,7 @@ def calibrate_family(
     kwargs = dict(max_steps=max_steps, rtol=rtol, atol=atol, throw=throw)
     kwargs |= dict(covariance=covariance, confidence=confidence)
     if positions is not None:
-        if not hasattr(model, "at"):
+        if not isinstance(model, AbstractFamilyLaw):
             raise TypeError(
                 "calibrate_family: with `positions`, the model must be a family law with a "
                 "method at(positions) returning the batched models (e.g. "

@@ -27,7 +27,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, PyTree
 
-from ..models import AbstractLinearModel, frequency_response, map_batch
+from ..data import Record
+from ..models import AbstractLinearModel, AbstractModel, frequency_response, map_batch, simulate
 
 __all__ = [
     "AbstractResidual",
@@ -89,17 +90,22 @@ def _contains(data: Any, name: str) -> bool:
         return False
 
 
+def _attributes(data: Any) -> set[str]:
+    """Public data attributes of a container object (e.g. `FRFData.omega`)."""
+    return {n for n in dir(data) if not n.startswith("_")}
+
+
 def _has(data: Any, name: str) -> bool:
     if isinstance(data, Mapping):
         return name in data
-    return _contains(data, name) or hasattr(data, name)
+    return _contains(data, name) or name in _attributes(data)
 
 
 def _lookup(data: Any, name: str, where: str) -> Any:
     """`data[name]` for mappings and Records (signals), else the attribute `data.name`."""
     if isinstance(data, Mapping) and name in data or _contains(data, name):
         return data[name]
-    if not isinstance(data, Mapping) and hasattr(data, name):
+    if not isinstance(data, Mapping) and name in _attributes(data):
         return getattr(data, name)
     have = list(data.keys()) if isinstance(data, Mapping) else getattr(data, "names", None)
     raise ValueError(
@@ -329,21 +335,15 @@ class SimulationError(_AbstractTimeResidual):
         if self.fn is not None:
             y_hat = self.fn(model, data)
         elif isinstance(model, AbstractLinearModel):
-            try:
-                from ..models import simulate
-            except ImportError as e:  # pragma: no cover - depends on the build state
-                raise TypeError(
-                    "SimulationError: jaxvs.simulate is not available in this build; give "
-                    "fn=... to simulate the model yourself."
-                ) from e
             y_hat = simulate(model, data["u"], data["dt"], method=self.method)
-        elif hasattr(model, "simulate"):
-            y_hat = model.simulate(data["u"], data["dt"])
+        elif isinstance(model, AbstractModel):
+            y_hat = model.predict(data["u"], data["dt"])
         else:
             raise TypeError(
                 f"SimulationError: do not know how to simulate a {type(model).__name__}. "
-                "Give fn=lambda model, data: ... (returning the simulated output), or give "
-                "the module a method simulate(u, dt)."
+                "Give fn=lambda model, data: ... (returning the simulated output), or "
+                "derive the module from jaxvs.models.AbstractModel and implement "
+                "predict(u, dt)."
             )
         return self._compare(jnp.asarray(y_hat), data["y"], self.skip)
 
@@ -440,7 +440,7 @@ class PredictionError(_AbstractTimeResidual):
 
     - `fn`: optional `fn(model, data) -> ŷ` (same shape as `y`, `ŷ_k` a prediction from
       data before `k`). Default: the discretised ARX predictor above for SISO linear
-      models, otherwise `model.predict(u, y, dt)`.
+      models; other models give `fn`.
     - `inputs`, `outputs`, `skip`: as for [`SimulationError`][].
     """
 
@@ -484,12 +484,11 @@ class PredictionError(_AbstractTimeResidual):
             conv_a = jnp.convolve(y, a)[:t] - y  # Σ_{i>=1} a_i y_{k-i}
             y_hat = conv_b - conv_a
             start = max(self.skip, n)
-        elif hasattr(model, "predict"):
-            y_hat = model.predict(u, y, data["dt"])
         else:
             raise TypeError(
-                f"PredictionError: {type(model).__name__} has no one-step predictor; give "
-                "fn=lambda model, data: ... or a method predict(u, y, dt)."
+                f"PredictionError: {type(model).__name__} has no built-in one-step predictor "
+                "(only linear models have); give fn=lambda model, data: ... returning the "
+                "one-step-ahead prediction of data['y']."
             )
         return self._compare(jnp.asarray(y_hat), y, start)
 
@@ -589,12 +588,10 @@ class FrequencyError(AbstractResidual):
             G = self.fn(model, data)
         elif isinstance(model, AbstractLinearModel):
             G = frequency_response(model, omega)
-        elif hasattr(model, "frequency_response"):
-            G = model.frequency_response(omega)
         else:
             raise TypeError(
-                f"FrequencyError: {type(model).__name__} has no frequency response; give "
-                "fn=lambda model, data: ... or a method frequency_response(omega)."
+                f"FrequencyError: {type(model).__name__} is not a jaxvs linear model; give "
+                "fn=lambda model, data: ... returning its complex response at data['omega']."
             )
         G = jnp.asarray(G)
         if G.shape != H.shape:
@@ -634,7 +631,7 @@ class EquationError(AbstractResidual):
                     return _check_finite(arr, jax.tree_util.keystr(path) or "data", "EquationError")
             return x
 
-        if hasattr(data, "names") and hasattr(data, "to_array"):  # a jaxvs.data.Record
+        if isinstance(data, Record):
             data = {"t": data.t, "dt": data.dt, **{n: data[n] for n in data.names}}
         return jax.tree_util.tree_map_with_path(check, data)
 

@@ -1,4 +1,9 @@
-"""The interface every linear jaxvs model implements, and the batching convention.
+"""The interface every jaxvs model implements, and the batching convention.
+
+[`AbstractModel`][] is one experiment in, one prediction out: `predict(u, dt)`, a pure
+function of the model's parameters. [`AbstractLinearModel`][] adds the frequency response
+and a state-space realisation (and gets `predict` from the exact-discretisation engine).
+[`AbstractFamilyLaw`][] describes how a family of linear models varies with a position.
 
 A model's array fields are its physical parameters. One model describes one system;
 a *family* is the same model class whose array fields carry extra leading axes
@@ -15,14 +20,38 @@ from typing import TYPE_CHECKING, Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Complex
+from jaxtyping import Array, ArrayLike, Complex, Float
 
 if TYPE_CHECKING:
-    from ._realisation import ModalRealisation
-    from ._statespace import StateSpace
+    from .lti import ModalRealisation, StateSpace
 
 
-class AbstractLinearModel(eqx.Module):
+class AbstractModel(eqx.Module):
+    """A model of one experiment: a pure, differentiable function of its parameters.
+
+    Every jaxvs model implements `predict`; `jaxvs.calibration.SimulationError` calibrates
+    any of them, `jax.vmap` over the parameters makes a family, `jax.jit` compiles it.
+    """
+
+    @abc.abstractmethod
+    def predict(
+        self, u: Float[ArrayLike, " time *input"], dt: float
+    ) -> Float[Array, " time *output"]:
+        """The model's output for one experiment.
+
+        **Arguments:**
+
+        - `u`: `(time,)` or `(time, input)` input samples (time axis first), in the units
+          the model documents; models that depend on time only use its length.
+        - `dt`: sample time [s].
+
+        **Returns:**
+
+        `(time,)` or `(time, output)` predicted output samples.
+        """
+
+
+class AbstractLinearModel(AbstractModel):
     """A continuous-time, finite-dimensional linear time-invariant model.
 
     Subclasses implement the response of one system; batching over a family is done by
@@ -68,6 +97,23 @@ class AbstractLinearModel(eqx.Module):
     @property
     def is_siso(self) -> bool:
         return self.n_inputs == 1 and self.n_outputs == 1
+
+    def predict(
+        self, u: Float[ArrayLike, " time *input"], dt: float
+    ) -> Float[Array, " time *output"]:
+        """Zero-order-hold response from rest (`jaxvs.simulate(self, u, dt)`)."""
+        # The simulation engine builds on this module, so it is looked up at call time.
+        from ._simulate import simulate
+
+        return simulate(self, u, dt)
+
+
+class AbstractFamilyLaw(eqx.Module):
+    """How a linear model varies with the position of another axis (a TMF family)."""
+
+    @abc.abstractmethod
+    def at(self, position: ArrayLike) -> AbstractLinearModel:
+        """The batched linear models at `(n,)` positions [m]."""
 
 
 def _leaf_batch(leaf: Array, core_ndim: int) -> tuple[int, ...]:

@@ -7,7 +7,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import scipy.stats as st
 
-from ..calibration import ResidualAnalysis, residual_analysis
+from ..studies import ResidualAnalysis, residual_analysis
 
 __all__ = ["correlation_plot", "prediction_plot", "residual_plot"]
 
@@ -31,7 +31,7 @@ def residual_plot(
     - `residuals`: `(n,)` measured minus predicted [`unit`].
     - `t`: `(n,)` times [s] (default: sample index); `operating_point`: `(n,)` e.g. the
       motor speed (default: the fourth panel shows residual vs predicted lag-1 residual).
-    - `analysis`: a precomputed [`jaxvs.calibration.ResidualAnalysis`][] (default: computed).
+    - `analysis`: a precomputed [`jaxvs.studies.ResidualAnalysis`][] (default: computed).
 
     **Returns:** the matplotlib `Figure`.
     """
@@ -81,7 +81,7 @@ def correlation_plot(names: Sequence[str], R: np.ndarray, *, title: str | None =
     """Matrix of correlation coefficients (study Fig. 5), annotated with their values.
 
     **Arguments:** `names`: `(n,)` variable names; `R`: `(n, n)` correlation matrix (e.g.
-    from [`jaxvs.calibration.correlation_matrix`][]).
+    from [`jaxvs.studies.correlation_matrix`][]).
 
     **Returns:** the matplotlib `Figure`.
     """

@@ -21,7 +21,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from .._custom_types import RealScalarLike
-from ..data._frf import FRFData
+from ..data import FRFData
 from ._windows import _ALIASES, _check_fs, get_window
 
 Detrend = Literal["constant", "linear", "none"] | None

@@ -68,9 +68,7 @@ cells = [
         import matplotlib.pyplot as plt
         from IPython.display import Markdown, display
         import jaxvs
-        from jaxvs.calibration import (ExcitationLocationWarning, check_excitation_location,
-            family_error, tmf_family, tmf_from_accelerations, tmf_from_hammer,
-            tmf_from_time_domain)
+        from jaxvs.studies import ExcitationLocationWarning, check_excitation_location, family_error, tmf_family, tmf_from_accelerations, tmf_from_hammer, tmf_from_time_domain
         from jaxvs.data import prbs, trapezoid
         from jaxvs.plotting import bode_plot
         from jaxvs.signal import psd, transmissibility

@@ -33,7 +33,7 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
-from ..data import Record
+from ...data import Record
 
 FRICTION_MODELS = ("coulomb_viscous", "asymmetric")
 _PARAMETER_NAMES = {

@@ -30,8 +30,23 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
-from ..data import FRFData
-from ..models import (
+from ...calibration import (
+    CalibrationResult,
+    FrequencyError,
+    ModalFit,
+    SimulationError,
+    calibrate,
+    calibrate_family,
+    fit_rational,
+    lsfd,
+    modal_fit,
+    pole_tracks,
+    stable,
+    tmf_from_modal,
+    unwrap,
+)
+from ...data import FRFData
+from ...models import (
     ModalModel,
     RationalTF,
     SmoothFamily,
@@ -39,14 +54,7 @@ from ..models import (
     simulate,
     static_gain,
 )
-from ..signal import exponential_window_correction, transmissibility
-from ._calibrate import CalibrationResult, calibrate
-from ._family import calibrate_family
-from ._fit_rational import fit_rational
-from ._lscf import pole_tracks
-from ._modal_fit import ModalFit, lsfd, modal_fit, tmf_from_modal
-from ._parametrise import stable, unwrap
-from ._residuals import FrequencyError, SimulationError
+from ...signal import exponential_window_correction, transmissibility
 
 Side = Literal["drive", "encoder", "tcp"]
 _SIDES = ("drive", "encoder", "tcp")
@@ -678,8 +686,8 @@ def tmf_from_hammer(
     **Raises:** `ValueError` for records of different shapes, a record too short for the
     band, or a bad `tau`.
     """
-    from ..data import FRFData
-    from ..signal import frf_h1, impact_windows
+    from ...data import FRFData
+    from ...signal import frf_h1, impact_windows
 
     where = "tmf_from_hammer"
     force = np.asarray(force, float)

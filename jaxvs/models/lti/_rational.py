@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from ._base import AbstractLinearModel, check_batch
+from .._base import AbstractLinearModel, check_batch
 from ._realisation import ModalRealisation, from_poles
 from ._statespace import _as_float
 

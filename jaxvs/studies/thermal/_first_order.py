@@ -18,8 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..models import FirstOrder, PiecewiseFirstOrder
-from ._lm import lm_init, lm_running, lm_step
+from ...calibration import lm_init, lm_running, lm_step
+from ...models import FirstOrder, PiecewiseFirstOrder
 
 __all__ = ["ThermalFitWarning", "fit_first_order", "fit_piecewise_first_order"]
 

@@ -13,7 +13,7 @@ import numpy as np
 import scipy.stats as st
 from jaxtyping import ArrayLike, Float
 
-from ..data import Record, split_blocks
+from ...data import Record, split_blocks
 
 __all__ = [
     "NoOperatingPointChangeWarning",

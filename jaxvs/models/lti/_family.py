@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
-from ._base import AbstractLinearModel
+from .._base import AbstractFamilyLaw, AbstractLinearModel
 from ._modal import ModalModel
 from ._rational import RationalTF
 
@@ -134,7 +134,7 @@ def _interpolate_leaf(leaf: Array, grid: Array, idx: Array, t: Array, method: st
 # ---------------------------------------------------------------------------------------
 
 
-class GridFamily(eqx.Module):
+class GridFamily(AbstractFamilyLaw):
     """A model family given at grid points of a scheduling variable, interpolated between.
 
     E.g. a `ModalModel` fitted at each of 8 positions of the y-axis (Doerrer et al. 2022,
@@ -309,7 +309,7 @@ class GridFamily(eqx.Module):
 # ---------------------------------------------------------------------------------------
 
 
-class SmoothFamily(eqx.Module):
+class SmoothFamily(AbstractFamilyLaw):
     """A model family given by a law of a scheduling variable: `law(params, position)`.
 
     E.g. a natural frequency that depends on the other axis' position,

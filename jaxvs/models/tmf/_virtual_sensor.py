@@ -17,9 +17,9 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractLinearModel
-from ._discretise import METHODS
-from ._simulate import simulate
+from .._base import AbstractLinearModel, AbstractModel
+from .._discretise import METHODS
+from .._simulate import simulate
 
 _WHO = "VirtualSensor"
 
@@ -34,7 +34,7 @@ def _upsample(x: Array, n: int) -> Array:
     return fine.reshape(*x.shape[:-1], x.shape[-1] * n)
 
 
-class VirtualSensor(eqx.Module):
+class VirtualSensor(AbstractModel):
     r"""TCP position from the encoder position (and optionally the TCP force), eq. 5 / eq. 7.
 
     **Arguments:**
@@ -145,3 +145,11 @@ class VirtualSensor(eqx.Module):
                 "(eq. 7 form); build VirtualSensor(tmf, h_et, h_tt) to use it."
             )
         return self._sim(self.tmf, x_e, dt_arr)
+
+    def predict(self, u: Float[ArrayLike, " time *input"], dt: float) -> Float[Array, " time"]:
+        """TCP position [m] from `u`: the encoder position `(time,)`, or `(time, 2)` with
+        the encoder position and the process force [N] for an eq. 5 sensor."""
+        u = jnp.asarray(u)
+        if u.ndim == 2 and u.shape[1] == 2:
+            return self(u[:, 0], dt, u[:, 1])
+        return self(u, dt)

@@ -31,9 +31,9 @@ import optax
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from ..models import BiasFreeRegression, Perceptron
-from ._compile import timed_call
-from ._residuals import ExcitationWarning
+from ..._misc import timed_call
+from ...calibration import ExcitationWarning
+from ...models import BiasFreeRegression, Perceptron
 
 __all__ = [
     "STOP_REASONS",
@@ -111,7 +111,7 @@ def _as_xy(u: Any, y: Any, n_inputs: int, where: str) -> tuple[Array, Array]:
             raise ValueError(
                 f"{where}: the {name} have {int(bad.sum())} NaN/inf values (missing samples). "
                 "Resample the target onto the input grid first "
-                "(jaxvs.calibration.resample_sparse) or cut the record."
+                "(jaxvs.studies.resample_sparse) or cut the record."
             )
     return jnp.asarray(u), jnp.asarray(y)
 

@@ -27,10 +27,9 @@ from typing import Any, Literal
 import jax.numpy as jnp
 import numpy as np
 
-from ..data import Record
-from ..models import DriveAxis
-from ._calibrate import CalibrationResult, calibrate
-from ._residuals import EquationError, ExcitationWarning
+from ...calibration import CalibrationResult, EquationError, ExcitationWarning, calibrate
+from ...data import Record
+from ...models import DriveAxis
 
 __all__ = ["calibrate_drive", "drive_residual"]
 

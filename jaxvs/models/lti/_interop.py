@@ -20,8 +20,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..data._frf import FRFData
-from ._base import AbstractLinearModel
+from ...data import FRFData
+from .._base import AbstractLinearModel
 from ._convert import to_rational
 from ._rational import RationalTF
 from ._statespace import StateSpace
@@ -381,7 +381,8 @@ def from_control(
     if isinstance(system, control.FrequencyResponseData):
         omega = np.asarray(system.omega, dtype=float)
         # (out, in, freq); `fresp` is deprecated in favour of `frdata` in control >= 0.10.1
-        response = np.asarray(system.frdata if hasattr(system, "frdata") else system.fresp)
+        frdata = getattr(system, "frdata", None)
+        response = np.asarray(system.fresp if frdata is None else frdata)
         response = response.reshape(system.noutputs, system.ninputs, omega.shape[0])
         f = omega / (2 * np.pi)
         if response.shape[0] == 1 and response.shape[1] == 1:
@@ -396,7 +397,7 @@ def from_control(
             output_unit=output_unit,
             io_shape=() if H.ndim == 1 else tuple(H.shape[1:]),
         )
-    if not isinstance(system, control.InputOutputSystem) or not hasattr(system, "dt"):
+    if not isinstance(system, control.InputOutputSystem) or "dt" not in dir(system):
         raise TypeError(
             "from_control: expected a python-control TransferFunction, StateSpace or "
             f"FrequencyResponseData; got {type(system).__name__}. For scipy use from_scipy."

@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float, Shaped
 
-from ._base import AbstractLinearModel, map_batch
+from .._base import AbstractLinearModel, map_batch
 from ._modal import ModalModel
 from ._rational import RationalTF
 from ._realisation import ModalRealisation

@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Complex, Float
 
-from ._base import AbstractLinearModel
+from .._base import AbstractLinearModel
 from ._convert import (
     block_poles,
     check_model,

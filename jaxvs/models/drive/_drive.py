@@ -36,17 +36,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._ballscrew import AbstractMechanics
-from ._friction import quantise, saturation
-from ._nonlinear_simulate import (
+from .._nonlinear_simulate import (
     check_step,
     finite_or_error,
     solve_ode,
     solve_sampled,
     zoh_interval,
 )
-from ._rational import RationalTF
-from ._statespace import StateSpace
+from ..lti import RationalTF, StateSpace
+from ._ballscrew import AbstractMechanics
+from ._friction import quantise, saturation
 
 __all__ = [
     "AbstractActuator",
@@ -571,7 +570,7 @@ class DriveAxis(eqx.Module):
 
         `(freq,)` complex.
         """
-        from ._response import frequency_response
+        from ..lti import frequency_response
 
         idx = {"table": 0, "motor": 1, "force": 2}
         if output not in idx:

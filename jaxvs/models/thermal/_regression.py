@@ -6,14 +6,15 @@ measured series (19.8 °C and 496 rpm in the study). The intercept `c` is then t
 at the lowest operating point.
 """
 
-import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
+
+from .._base import AbstractModel
 
 __all__ = ["BiasFreeRegression"]
 
 
-class BiasFreeRegression(eqx.Module):
+class BiasFreeRegression(AbstractModel):
     """`y = intercept + Σ_i coef_i (u_i - bias_i)` (study eq. 2-3).
 
     **Arguments:**
@@ -52,3 +53,8 @@ class BiasFreeRegression(eqx.Module):
                 f"{u.shape}."
             )
         return self.intercept + (u - self.bias) @ self.coef
+
+    def predict(self, u: Float[ArrayLike, " time input"], dt: float) -> Float[Array, " time"]:
+        """The output for the input samples `u` (a static map of the delayed inputs; `dt`
+        only names the sampling)."""
+        return self(u)

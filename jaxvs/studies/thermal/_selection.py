@@ -11,8 +11,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..data import Record
-from ._residuals import ExcitationWarning
+from ...calibration import ExcitationWarning
+from ...data import Record
 
 __all__ = ["InputRank", "correlation_matrix", "rank_inputs"]
 

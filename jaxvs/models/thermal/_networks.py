@@ -9,7 +9,7 @@ normalisation is part of the model but is not trained.
 
 Both networks are a [`Perceptron`][] (the trainable weights) applied sample by sample to
 *features*: the normalised inputs (static network) or the normalised inputs and their
-delayed copies (TDNN). Trainers (`jaxvs.calibration.train_lm`, `train_adam`) train the
+delayed copies (TDNN). Trainers (`jaxvs.studies.train_lm`, `train_adam`) train the
 perceptron on `net.features(u)`; batching over samples is one `vmap`.
 """
 
@@ -21,6 +21,8 @@ import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
+
+from .._base import AbstractModel
 
 __all__ = ["Perceptron", "StaticNetwork", "TimeDelayNetwork"]
 
@@ -216,7 +218,7 @@ def _normalisation(n_inputs: int, dtype, input_range, output_range):
     return u_offset, u_scale, y_offset, y_scale
 
 
-class StaticNetwork(eqx.Module):
+class StaticNetwork(AbstractModel):
     """Static two-layer network: `y(k) = f(u(k))` (the study's static ANN, Fig. 7(a)).
 
     **Arguments:**
@@ -269,8 +271,13 @@ class StaticNetwork(eqx.Module):
         """Prediction `(time,)` for inputs `u` of shape `(time, input)`."""
         return self.output(jax.vmap(self.perceptron)(self.features(u)))
 
+    def predict(self, u: Float[ArrayLike, " time input"], dt: float) -> Float[Array, " time"]:
+        """The output for the input samples `u` (a static map of the delayed inputs; `dt`
+        only names the sampling)."""
+        return self(u)
 
-class TimeDelayNetwork(eqx.Module):
+
+class TimeDelayNetwork(AbstractModel):
     """Time-delay network (TDNN): `y(k) = f(u(k), u(k-1), ..., u(k-d))` (study Fig. 7(b)).
 
     **Arguments:**
@@ -337,3 +344,8 @@ class TimeDelayNetwork(eqx.Module):
     def __call__(self, u: Float[ArrayLike, "time input"]) -> Float[Array, " time"]:
         """Prediction `(time,)` for inputs `u` of shape `(time, input)`."""
         return self.output(jax.vmap(self.perceptron)(self.features(u)))
+
+    def predict(self, u: Float[ArrayLike, " time input"], dt: float) -> Float[Array, " time"]:
+        """The output for the input samples `u` (a static map of the delayed inputs; `dt`
+        only names the sampling)."""
+        return self(u)

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from ._base import check_batch, map_batch
+from .._base import check_batch, map_batch
 from ._modal import ModalModel
 from ._rational import RationalTF
 from ._statespace import StateSpace, _as_float

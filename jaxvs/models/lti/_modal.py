@@ -5,7 +5,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float, Shaped
 
-from ._base import AbstractLinearModel, check_batch
+from .._base import AbstractLinearModel, check_batch
 from ._realisation import ModalRealisation
 from ._statespace import _as_float
 

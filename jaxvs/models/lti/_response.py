@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex
 
-from ._base import AbstractLinearModel, map_batch
+from .._base import AbstractLinearModel, map_batch
 
 
 def frequency_response(

@@ -20,6 +20,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .._base import AbstractModel
+
 __all__ = ["DrivenFirstOrder", "FirstOrder", "PiecewiseFirstOrder"]
 
 
@@ -30,7 +32,7 @@ def _scalar(x, name: str) -> Array:
     return x
 
 
-class FirstOrder(eqx.Module):
+class FirstOrder(AbstractModel):
     """`T(t) = T0 + k (1 - exp(-t/T1))` (study eq. 1).
 
     **Arguments:**
@@ -55,13 +57,17 @@ class FirstOrder(eqx.Module):
         t = jnp.asarray(t)
         return self.T0 + self.k * -jnp.expm1(-t / self.T1)
 
+    def predict(self, u: Float[ArrayLike, " time *input"], dt: float) -> Float[Array, " time"]:
+        """Temperature [°C] at `t = k·dt`, `k = 0 … len(u)-1` (a function of time only)."""
+        return self(jnp.arange(jnp.shape(u)[0]) * dt)
+
     @property
     def final_value(self) -> Float[Array, "*batch"]:
         """`T0 + k` [°C], the steady state."""
         return self.T0 + self.k
 
 
-class PiecewiseFirstOrder(eqx.Module):
+class PiecewiseFirstOrder(AbstractModel):
     """One first-order law per experiment part (operating point).
 
     **Arguments:**
@@ -113,12 +119,16 @@ class PiecewiseFirstOrder(eqx.Module):
         local = t - self.starts[i]
         return self.start_values[i] + self.k[i] * -jnp.expm1(-local / self.T1[i])
 
+    def predict(self, u: Float[ArrayLike, " time *input"], dt: float) -> Float[Array, " time"]:
+        """Temperature [°C] at `t = k·dt`, `k = 0 … len(u)-1` (a function of time only)."""
+        return self(jnp.arange(jnp.shape(u)[0]) * dt)
+
     def parts(self) -> FirstOrder:
         """The parts as a batched [`FirstOrder`][] (local time of each part)."""
         return FirstOrder(self.start_values, self.k, self.T1)
 
 
-class DrivenFirstOrder(eqx.Module):
+class DrivenFirstOrder(AbstractModel):
     """The first-order law as an ODE driven by an input: `T1 dT/dt = T_ref + K u(t) - T`.
 
     A step of `u` by `Δu` at `t = 0` from steady state gives exactly [`FirstOrder`][] with
@@ -217,3 +227,9 @@ class DrivenFirstOrder(eqx.Module):
 
     def __call__(self, t, u, T_init=None):
         return self.simulate(t, u, T_init)
+
+    def predict(self, u: Float[ArrayLike, " time"], dt: float) -> Float[Array, " time"]:
+        """Temperature [°C] for the input samples `u` every `dt` [s], from the steady
+        state of `u[0]`."""
+        u = jnp.asarray(u, self.T1.dtype)
+        return self.simulate(jnp.arange(u.shape[0], dtype=u.dtype) * dt, u)

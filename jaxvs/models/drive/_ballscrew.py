@@ -23,9 +23,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._chain import NormalModes
+from ..lti import NormalModes, normal_modes
 from ._friction import AbstractFriction, NoFriction, dead_zone
-from ._modes import normal_modes
 
 __all__ = ["AbstractMechanics", "BallScrew", "FlexibleAxis", "RigidAxis"]
 

@@ -19,7 +19,7 @@ import numpy as np
 import scipy.interpolate as si
 from jaxtyping import ArrayLike, Float
 
-from ..models import PiecewiseFirstOrder
+from ...models import PiecewiseFirstOrder
 from ._first_order import ThermalFitWarning, _check_series, fit_piecewise_first_order
 
 __all__ = ["correct_outliers", "detect_outliers", "resample_sparse"]

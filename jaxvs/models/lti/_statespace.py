@@ -5,7 +5,7 @@ from typing import TYPE_CHECKING
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from ._base import AbstractLinearModel, check_batch
+from .._base import AbstractLinearModel, check_batch
 
 if TYPE_CHECKING:
     from ._realisation import ModalRealisation

@@ -1,0 +1,41 @@
+"""CNC axis-drive components: friction laws, axis mechanics (rigid, two-mass, ball screw),
+cascaded P/PI loops, actuators, the `DriveAxis` cascade, and two-axis contouring."""
+
+from ._ballscrew import (
+    AbstractMechanics as AbstractMechanics,
+    BallScrew as BallScrew,
+    FlexibleAxis as FlexibleAxis,
+    RigidAxis as RigidAxis,
+)
+from ._contouring import (
+    BallbarResult as BallbarResult,
+    GeometricErrors as GeometricErrors,
+    XYTable as XYTable,
+    ballbar_test as ballbar_test,
+    circle_path as circle_path,
+)
+from ._drive import (
+    AbstractActuator as AbstractActuator,
+    CurrentLoop as CurrentLoop,
+    DCMotor as DCMotor,
+    DriveAxis as DriveAxis,
+    DriveResponse as DriveResponse,
+    ForceGain as ForceGain,
+    PositionLoop as PositionLoop,
+    UnstableLoopError as UnstableLoopError,
+    VelocityLoop as VelocityLoop,
+)
+from ._friction import (
+    AbstractFriction as AbstractFriction,
+    AsymmetricFriction as AsymmetricFriction,
+    CoulombFriction as CoulombFriction,
+    CoulombViscousFriction as CoulombViscousFriction,
+    FrictionSum as FrictionSum,
+    NoFriction as NoFriction,
+    StribeckFriction as StribeckFriction,
+    ViscousFriction as ViscousFriction,
+    dead_zone as dead_zone,
+    quantise as quantise,
+    saturation as saturation,
+    smooth_sign as smooth_sign,
+)

@@ -1,0 +1,14 @@
+"""Thermal virtual-sensor models: first-order exponential interpolation (study eq. 1),
+bias-free linear regression (eq. 2-3) and the static / time-delay networks."""
+
+from ._networks import (
+    Perceptron as Perceptron,
+    StaticNetwork as StaticNetwork,
+    TimeDelayNetwork as TimeDelayNetwork,
+)
+from ._regression import BiasFreeRegression as BiasFreeRegression
+from ._thermal import (
+    DrivenFirstOrder as DrivenFirstOrder,
+    FirstOrder as FirstOrder,
+    PiecewiseFirstOrder as PiecewiseFirstOrder,
+)

@@ -1,0 +1,59 @@
+"""The source studies' workflows, built on the generic engines of `jaxvs.calibration`.
+
+- `jaxvs.studies.thermal`: thermal virtual sensor (trainlm, sparse resampling, input
+  selection, virtual-sensor metrics);
+- `jaxvs.studies.drive`: CNC axis drives (IDIM-LS, closed-loop calibration);
+- `jaxvs.studies.tmf`: TMF virtual sensor (identification routes, position families).
+
+Every public name of the sub-packages is also available here.
+"""
+
+from . import drive as drive, thermal as thermal, tmf as tmf
+from .drive import (
+    ForcePrediction as ForcePrediction,
+    IDIMResult as IDIMResult,
+    calibrate_drive as calibrate_drive,
+    drive_residual as drive_residual,
+    idim_ls as idim_ls,
+    idim_regressor as idim_regressor,
+    predict_force as predict_force,
+)
+from .thermal import (
+    STOP_REASONS as STOP_REASONS,
+    ExtrapolationWarning as ExtrapolationWarning,
+    InputRank as InputRank,
+    NoOperatingPointChangeWarning as NoOperatingPointChangeWarning,
+    ResidualAnalysis as ResidualAnalysis,
+    ThermalFitWarning as ThermalFitWarning,
+    TrainResult as TrainResult,
+    correct_outliers as correct_outliers,
+    correlation_matrix as correlation_matrix,
+    detect_outliers as detect_outliers,
+    fit_first_order as fit_first_order,
+    fit_piecewise_first_order as fit_piecewise_first_order,
+    fit_regression as fit_regression,
+    mapd as mapd,
+    normalise_network as normalise_network,
+    r2 as r2,
+    rank_inputs as rank_inputs,
+    resample_sparse as resample_sparse,
+    residual_analysis as residual_analysis,
+    rmse as rmse,
+    split_train_test as split_train_test,
+    train_adam as train_adam,
+    train_lm as train_lm,
+    vs_metrics as vs_metrics,
+)
+from .tmf import (
+    ExcitationLocationWarning as ExcitationLocationWarning,
+    TMFIdentification as TMFIdentification,
+    check_excitation_location as check_excitation_location,
+    family_error as family_error,
+    tmf_family as tmf_family,
+    tmf_from_accelerations as tmf_from_accelerations,
+    tmf_from_frfs as tmf_from_frfs,
+    tmf_from_hammer as tmf_from_hammer,
+    tmf_from_impacts as tmf_from_impacts,
+    tmf_from_time_domain as tmf_from_time_domain,
+    with_static_gain as with_static_gain,
+)
