@@ -130,6 +130,9 @@ class FirstOrderARX(eqx.Module):
         return jnp.concatenate([y[:1], self.a * y[:-1] + self.b * u[:-1]])
 
 
+ONE_STEP = PredictionError(lambda m, d: m.predict_one_step(d["u"], d["y"]), skip=1)
+
+
 def test_prediction_error_user_predictor():
     rng = np.random.default_rng(9)
     u = rng.normal(size=300)
@@ -137,6 +140,6 @@ def test_prediction_error_user_predictor():
     for k in range(1, 300):  # independent numpy recursion
         y[k] = 0.9 * y[k - 1] + 0.5 * u[k - 1]
     guess = FirstOrderARX(jnp.asarray(0.5), jnp.asarray(1.0))
-    out = jaxvs.calibrate(guess, {"u": u, "y": y, "dt": 1.0}, PredictionError(lambda m, d: m.predict_one_step(d["u"], d["y"]), skip=1))
+    out = jaxvs.calibrate(guess, {"u": u, "y": y, "dt": 1.0}, ONE_STEP)
     np.testing.assert_allclose(out.values, [0.9, 0.5], rtol=1e-10)  # linear in (a, b): exact
     assert out.residual.shape == (299,)

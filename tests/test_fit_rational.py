@@ -367,3 +367,13 @@ def test_overparametrised_exact_data_is_singular():
     assert _rel(jaxvs.frequency_response(model, OMEGA), h) < 1e-8
     with pytest.raises(eqx.EquinoxRuntimeError, match="not identifiable"):
         jaxvs.fit_rational(OMEGA, h, (4, 4))
+
+
+def test_fit_report_summary_is_readable():
+    """FitReport prints its result by name (not `RESULTS<>`) and its figures."""
+    omega = jnp.linspace(1.0, 100.0, 200)
+    H = jaxvs.frequency_response(jaxvs.RationalTF([1.0, 2.0], [1.0, 3.0, 50.0]), omega)
+    _, report = jaxvs.fit_rational(omega, H, (1, 2))
+    text = report.summary()
+    assert text.startswith("result: successful") and "relative error" in text
+    assert "RESULTS<" not in text

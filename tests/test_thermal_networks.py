@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.stats as st
 
-from jaxvs.calibration import ExcitationWarning
+from jaxvs.calibration import ExcitationWarning, describe
 from jaxvs.data import Record
 from jaxvs.models import BiasFreeRegression, Perceptron, StaticNetwork, TimeDelayNetwork
 from jaxvs.studies import (
@@ -93,6 +93,10 @@ def test_early_stopping_on_validation_block():
     res = train_lm(net, u[:500], y[:500], validation=(u[500:], y[500:]), max_epochs=500, max_fail=6)
     k, best = int(res.epochs), int(res.best_epoch)
     assert res.stop_reason in ("validation_stop", "mu_max", "min_grad")
+    # the same stop as a code of the one RESULTS enumeration
+    names = {"validation_stop": "validation_stop", "mu_max": "damping_limit"}
+    names["min_grad"] = "gradient_small"
+    assert describe(res.result) == names[res.stop_reason]
     if res.stop_reason == "validation_stop":
         assert k == best + 6
     val = np.asarray(res.val_mse[: k + 1])

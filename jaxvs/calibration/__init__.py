@@ -18,8 +18,13 @@ from ._fit_rational import (
     fit_rational as fit_rational,
 )
 from ._lm import (
+    AbstractDamping as AbstractDamping,
+    LevenbergMarquardt as LevenbergMarquardt,
     LMState as LMState,
+    MarquardtDamping as MarquardtDamping,
+    NielsenDamping as NielsenDamping,
     batched_while as batched_while,
+    jacobian_normal_equations as jacobian_normal_equations,
     lm_init as lm_init,
     lm_result as lm_result,
     lm_running as lm_running,
@@ -61,7 +66,7 @@ from ._residuals import (
     PredictionError as PredictionError,
     SimulationError as SimulationError,
 )
-from ._results import RESULTS as RESULTS
+from ._results import RESULTS as RESULTS, describe as describe
 from ._sharding import (
     SweepResult as SweepResult,
     calibrate_family_sharded as calibrate_family_sharded,

@@ -27,76 +27,10 @@ from .._misc import is_traced, timed_call
 from ._covariance import delta_method, jacobian_covariance, t_quantile
 from ._parametrise import is_parameter, unwrap
 from ._residuals import AbstractResidual, Joint
-from ._results import RESULTS
+from ._results import RESULTS, describe, failure_message
 from ._solvers import make_solver
 
 __all__ = ["CalibrationResult", "calibrate", "free_spec"]
-
-
-# Why a calibration stopped; each reason maps to one RESULTS code and has its own
-# message (the RESULTS messages are shared with fit_rational and are less specific).
-_REASONS: tuple[tuple[str, str], ...] = (
-    ("successful", ""),
-    (
-        "unstable_initial_guess",
-        "calibrate: the initial guess is unstable (a pole in the right half-plane), so its "
-        "simulation diverges. Start from a stable model (reflect unstable poles p -> "
-        "-conj(p)), or parametrise it with jaxvs.calibration.stable(model) so that every "
-        "iterate stays stable.",
-    ),
-    (
-        "nonfinite",
-        "calibrate: the residual or its Jacobian is NaN or inf at the initial guess. Start "
-        "from parameters where the model can be evaluated (no zero time constant or mass, "
-        "no division by a zero parameter, a simulation that does not blow up) and check "
-        "the data.",
-    ),
-    (
-        "max_steps_reached",
-        "calibrate: the solver did not converge within max_steps. Increase max_steps, "
-        "loosen rtol/atol, start closer to the solution (e.g. jaxvs.calibration.multistart), "
-        "or reparametrise badly scaled parameters (positive/bounded). Pass throw=False to "
-        "inspect the last iterate.",
-    ),
-    (
-        "nonfinite",
-        "calibrate: NaN or inf appeared during the solve: the model could not be evaluated "
-        "at some iterate (e.g. a parameter crossed zero or a simulation diverged). "
-        "Constrain the parameters with jaxvs.calibration.positive / bounded / stable so "
-        "that every iterate is valid, or start closer to the solution.",
-    ),
-    (
-        "singular",
-        "calibrate: the initial guess is degenerate: some free parameters had no influence "
-        "on the residual there (zero Jacobian columns: a zero gain or residue hides time "
-        "constants and frequencies; a zero or constant input excites nothing) and are still "
-        "not identified at the end. Start from a non-degenerate guess, use an exciting "
-        "input, or fix those parameters with free=...",
-    ),
-    (
-        "singular",
-        "calibrate: the Jacobian at the solution is rank deficient: some free parameters "
-        "are not identifiable from these data (an unexciting input, redundant or "
-        "compensating parameters). Excite the system more (PRBS, swept sine, white noise), "
-        "add experiments, or fix parameters with free=...; pass throw=False or "
-        "covariance=False to get the estimate anyway.",
-    ),
-    (
-        "singular",
-        "calibrate: the solver's linear solve failed (a singular or ill-posed step). "
-        "Reparametrise badly scaled parameters, fix redundant ones with free=..., or use "
-        "solver='levenberg_marquardt'.",
-    ),
-)
-_OK, _UNSTABLE0, _NONFINITE0, _MAX_STEPS, _NONFINITE, _DEGENERATE0, _SINGULAR, _LINSOLVE = range(8)
-
-
-def _code(reason: Int[Array, ""]) -> RESULTS:
-    result = RESULTS.successful
-    for i, (name, _) in enumerate(_REASONS):
-        if i:
-            result = RESULTS.where(reason == i, getattr(RESULTS, name), result)
-    return result
 
 
 class CalibrationResult(eqx.Module):
@@ -156,16 +90,9 @@ class CalibrationResult(eqx.Module):
             lines.append(f"{n:<{width}}  {v:12.6g}  {s:10.3g}  [{lo:.6g}, {hi:.6g}]")
         lines.append(
             f"cost {float(self.cost):.6g}, sigma^2 {float(self.sigma2):.3g}, dof {self.dof}, "
-            f"{int(self.num_steps)} steps, result: {_result_name(self.result)}"
+            f"{int(self.num_steps)} steps, result: {describe(self.result)}"
         )
         return "\n".join(lines)
-
-
-def _result_name(result: RESULTS) -> str:
-    for name in dict.fromkeys(name for name, _ in _REASONS):
-        if bool(result == getattr(RESULTS, name)):
-            return name
-    return "unknown"
 
 
 # ----------------------------------------------------------------------------- free leaves
@@ -349,15 +276,18 @@ def _normalise(residual: Any, data: Any, weights: Any) -> tuple[AbstractResidual
     return residual, data
 
 
-def _solver_reason(result: optx.RESULTS) -> Int[Array, ""]:
-    r = jnp.asarray(_OK)
-    r = jnp.where(result == optx.RESULTS.max_steps_reached, _MAX_STEPS, r)
-    r = jnp.where(result == optx.RESULTS.nonlinear_max_steps_reached, _MAX_STEPS, r)
+def _solver_result(result: optx.RESULTS) -> RESULTS:
+    """An optimistix/lineax outcome as a jaxvs code (the solver's own failure modes)."""
+    out = RESULTS.successful
+    for name in ("max_steps_reached", "nonlinear_max_steps_reached"):
+        out = RESULTS.where(result == getattr(optx.RESULTS, name), RESULTS.max_steps_reached, out)
     for name in ("nonfinite", "nonfinite_input", "nonlinear_divergence"):
-        r = jnp.where(result == getattr(optx.RESULTS, name), _NONFINITE, r)
+        out = RESULTS.where(result == getattr(optx.RESULTS, name), RESULTS.nonfinite, out)
     for name in ("singular", "breakdown", "stagnation", "conlim"):
-        r = jnp.where(result == getattr(optx.RESULTS, name), _LINSOLVE, r)
-    return r
+        out = RESULTS.where(
+            result == getattr(optx.RESULTS, name), RESULTS.linear_solve_failed, out
+        )
+    return out
 
 
 def _impl(
@@ -443,8 +373,9 @@ def _impl(
     r0, r = rs[0], rs[1]
     nonfinite0 = ~(jnp.all(jnp.isfinite(r0)) & jnp.all(jnp.isfinite(jac0)))
     zero_col0 = jnp.all(jac0 == 0, axis=0)
-    reason = _solver_reason(sol.result)
-    reason = jnp.where(jnp.all(jnp.isfinite(r)) | (reason != _OK), reason, _NONFINITE)
+    result = _solver_result(sol.result)
+    ok = result == RESULTS.successful
+    result = RESULTS.where(jnp.all(jnp.isfinite(r)) | ~ok, result, RESULTS.nonfinite)
 
     fitted = build(theta, static)
     phys_tree = _physical(fitted, spec)
@@ -458,18 +389,20 @@ def _impl(
             theta
         )
         cov = delta_method(grad, cov_raw, unidentified)
-        singular = jnp.any(unidentified)
-        reason = jnp.where(
-            (reason == _OK) & singular,
-            jnp.where(jnp.any(zero_col0), _DEGENERATE0, _SINGULAR),
-            reason,
+        singular = jnp.any(unidentified) & (result == RESULTS.successful)
+        result = RESULTS.where(
+            singular,
+            RESULTS.where(
+                jnp.any(zero_col0), RESULTS.degenerate_initial_guess, RESULTS.singular
+            ),
+            result,
         )
     else:
         cov = jnp.full((q, q), jnp.nan, flat.dtype)
         rank = jnp.asarray(-1)
         sigma2 = jnp.sum(r**2) / dof
-    reason = jnp.where(nonfinite0, _NONFINITE0, reason)
-    reason = jnp.where(unstable0, _UNSTABLE0, reason)
+    result = RESULTS.where(nonfinite0, RESULTS.nonfinite_initial_guess, result)
+    result = RESULTS.where(unstable0, RESULTS.unstable_initial_guess, result)
 
     se = jnp.sqrt(jnp.diag(cov))
     tq = t_quantile(confidence, dof)
@@ -479,13 +412,12 @@ def _impl(
         "num_steps": jnp.asarray(sol.stats["num_steps"]),
         "rank": jnp.asarray(rank),
         "initial_cost": 0.5 * jnp.sum(r0**2),
-        "reason": reason,
         "compile_time": jnp.asarray(jnp.nan, flat.dtype),
         "run_time": jnp.asarray(jnp.nan, flat.dtype),
     }
     out = CalibrationResult(
         model=unwrap(fitted),
-        result=_code(reason),
+        result=result,
         residual=r,
         cost=0.5 * jnp.sum(r**2),
         values=values,
@@ -500,17 +432,17 @@ def _impl(
         confidence=float(confidence),
     )
     if throw:
-        out = eqx.branched_error_if(out, reason != _OK, reason, [m for _, m in _REASONS])
+        out = result.error_if(out, result != RESULTS.successful)
     return out
 
 
 def _failure_message(out: CalibrationResult) -> str | None:
     """Message for a concrete, failed calibration, naming the parameters involved."""
-    reason = int(np.max(np.asarray(out.stats["reason"])))
-    if reason == _OK:
+    msg = failure_message(out.result)
+    if msg is None:
         return None
-    msg = _REASONS[reason][1]
-    if reason in (_DEGENERATE0, _SINGULAR):
+    msg = "calibrate: " + msg
+    if msg.endswith((RESULTS[RESULTS.singular], RESULTS[RESULTS.degenerate_initial_guess])):
         bad = np.isinf(np.asarray(out.std_errors))
         if bad.ndim == 1 and bad.any():
             names = [n for n, b in zip(out.names, bad) if b]
@@ -531,8 +463,8 @@ def calibrate(
     free: Any = None,
     weights: Any = None,
     max_steps: int = 256,
-    rtol: float = 1e-8,
-    atol: float = 1e-8,
+    rtol: float | None = None,
+    atol: float | None = None,
     throw: bool = True,
     covariance: bool = True,
     confidence: float = 0.95,
@@ -556,7 +488,7 @@ def calibrate(
     - `residual`: a residual (`SimulationError`, `PredictionError`, `FrequencyError`,
       `EquationError`, `Joint`), applied to every experiment of a list, or a list of
       residuals paired with the list of data.
-    - `solver`: `None` (`optimistix.LevenbergMarquardt`), an optimistix least-squares
+    - `solver`: `None` ([`jaxvs.calibration.LevenbergMarquardt`][]), an optimistix least-squares
       solver, an optimistix minimiser such as `optimistix.BFGS` (on `½ Σ r²`), an optax
       optimiser such as `optax.adam(1e-2)`, or a name (`"levenberg_marquardt"`, `"bfgs"`,
       ...). Least-squares solvers and the covariance build Jacobians in forward mode, so
@@ -568,8 +500,9 @@ def calibrate(
       Everything else is fixed.
     - `weights`: scalar or array weight of the residual, or one weight per experiment when
       `data` is a list (e.g. `1/σ_noise` of each).
-    - `max_steps`, `rtol`, `atol`: solver budget and tolerances (used when the solver is
-      built here).
+    - `max_steps`: solver budget. `rtol`, `atol`: tolerances of a solver built here from
+      `None` or a name (default `1e-8`); a solver object carries its own (giving both is
+      an error).
     - `throw`: raise [`CalibrationError`][] (eagerly) or an `EquinoxRuntimeError` (under
       `jit`/`vmap`) with an actionable message when the calibration fails; with `False`,
       inspect `result.result` instead.

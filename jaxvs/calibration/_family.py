@@ -20,7 +20,6 @@ from .._misc import is_traced, timed_call
 from ..data import FRFData
 from ..models import AbstractFamilyLaw
 from ._calibrate import (
-    _REASONS,
     CalibrationError,
     CalibrationResult,
     _failure_message,
@@ -123,8 +122,8 @@ def multistart(
     free: Any = None,
     weights: Any = None,
     max_steps: int = 256,
-    rtol: float = 1e-8,
-    atol: float = 1e-8,
+    rtol: float | None = None,
+    atol: float | None = None,
     throw: bool = True,
     covariance: bool = True,
     confidence: float = 0.95,
@@ -187,8 +186,7 @@ def multistart(
     ok = out.starts.result == RESULTS.successful
     if throw:
         if times is None:
-            reason = jnp.min(out.starts.stats["reason"])
-            out = eqx.branched_error_if(out, ~jnp.any(ok), reason, [m for _, m in _REASONS])
+            out = _first_failure(out.starts.result).error_if(out, ~jnp.any(ok))
         elif not bool(np.any(np.asarray(ok))):
             first = _index(out.starts, int(np.argmin(np.asarray(out.starts.cost))))
             raise CalibrationError(
@@ -226,6 +224,12 @@ class _FamilyResidual(AbstractResidual):
         members = self._members(model)
         axes = eqx.if_array(0) if self.axes is None else self.axes
         return jnp.any(eqx.filter_vmap(self.residual.is_unstable, in_axes=(axes,))(members))
+
+
+def _first_failure(result: RESULTS) -> RESULTS:
+    """The code of the first failed member of a batched result (successful if none)."""
+    failed = (result != RESULTS.successful).reshape(-1)
+    return jax.tree_util.tree_map(lambda v: v.reshape(-1)[jnp.argmax(failed)], result)
 
 
 def _frf_family_to_list(data: Any) -> list | None:
@@ -300,8 +304,8 @@ def calibrate_family(
     shared: Any = None,
     free: Any = None,
     max_steps: int = 256,
-    rtol: float = 1e-8,
-    atol: float = 1e-8,
+    rtol: float | None = None,
+    atol: float | None = None,
     throw: bool = True,
     covariance: bool = True,
     confidence: float = 0.95,
@@ -396,9 +400,7 @@ def calibrate_family(
     if throw:
         failed = out.result != RESULTS.successful
         if times is None:
-            out = eqx.branched_error_if(
-                out, jnp.any(failed), jnp.max(out.stats["reason"]), [m for _, m in _REASONS]
-            )
+            out = _first_failure(out.result).error_if(out, jnp.any(failed))
         elif bool(np.any(np.asarray(failed))):
             bad = np.flatnonzero(np.asarray(failed))
             first = _index(out, int(bad[0]))

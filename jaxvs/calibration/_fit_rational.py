@@ -13,7 +13,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from ..models import RationalTF
 from . import _lm, _sk
 from ._lm import batched_while
-from ._results import RESULTS
+from ._results import RESULTS, describe
 
 # Heuristic: a unit-diagonal-scaled JᵀJ with condition number above 1e13 (float64 keeps
 # ~16 digits, the inverse then has at most ~3) is treated as singular.
@@ -80,6 +80,30 @@ class FitReport(eqx.Module):
     num_steps: Int[Array, "*batch"]
     num_init_steps: Int[Array, "*batch"]
     flipped: Bool[Array, "*batch"]
+
+    def summary(self) -> str:
+        """A plain-text account of the fit (like `CalibrationResult.summary`)."""
+        rel = np.asarray(self.relative_error)
+        if rel.ndim:
+            ok = np.asarray(self.result._value) == 0  # pyright: ignore
+            return (
+                f"FitReport over a batch of shape {rel.shape}: {int(ok.sum())} of {ok.size} "
+                f"fits successful, relative error median {np.median(rel):.3g}, max "
+                f"{np.max(rel):.3g}; index it for one fit."
+            )
+        num_se, den_se = np.asarray(self.num_stderr), np.asarray(self.den_stderr)
+        lines = [
+            f"result: {describe(self.result)}",
+            f"relative error {float(rel):.4g}, residual norm {float(self.residual_norm):.4g}, "
+            f"noise variance {float(self.noise_variance):.3g}",
+            f"numerator std errors   {np.array2string(num_se, precision=3)}",
+            f"denominator std errors {np.array2string(den_se, precision=3)}",
+            f"Jacobian condition {float(self.jacobian_condition):.3g}, frequency scale "
+            f"{float(self.frequency_scale):.4g} rad/s",
+            f"{int(self.num_steps)} LM steps after {int(self.num_init_steps)} "
+            f"Sanathanan-Koerner iterations" + (", poles reflected" if bool(self.flipped) else ""),
+        ]
+        return "\n".join(lines)
 
 
 def _as_order(order) -> tuple[int, int]:

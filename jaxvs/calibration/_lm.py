@@ -1,4 +1,10 @@
-r"""A small Levenberg-Marquardt kernel for ONE problem, and a driver that runs a family of them.
+r"""The one Levenberg-Marquardt of jaxvs: a kernel for ONE problem, a driver that runs a
+family of them, and the kernel as an optimistix least-squares solver.
+
+`calibrate` (through [`LevenbergMarquardt`][], an `optimistix.AbstractLeastSquaresSolver`),
+`fit_rational` (batched, with [`batched_while`][]), `fit_first_order`, the diagnosis and
+`train_lm` (with its structured Gauss-Newton matrix and trainlm's damping) all step with
+[`lm_step`][].
 
 The problem enters only through its *normal equations*: `evaluate(θ, args)` returns the
 cost `½‖r‖²`, the Gauss-Newton matrix `JᵀJ` and the gradient `Jᵀr`. Problems with
@@ -9,10 +15,13 @@ denominators): a step that would leave it is shortened to the largest feasible f
 on a fixed grid (the "fraction to the boundary" rule of interior-point methods, Nocedal &
 Wright 2006, *Numerical Optimization*, eq. 19.9), so every iterate is feasible.
 
-Algorithm: Marquardt's scaled damping `(JᵀJ + μ diag(JᵀJ)) δ = -Jᵀr` (Marquardt 1963,
-SIAM J. Appl. Math. 11(2)) and Nielsen's update of `μ` from the gain ratio (Nielsen 1999,
-IMM-REP-1999-05; Madsen, Nielsen & Tingleff 2004, *Methods for non-linear least squares
-problems*, Alg. 3.16). Stopping rules, all relative to `rtol`:
+Algorithm: the damped Gauss-Newton step `(JᵀJ + μ D) δ = -Jᵀr`; the damping policy is a
+component ([`AbstractDamping`][]): [`NielsenDamping`][] (default) uses Marquardt's scaling
+`D = diag(JᵀJ)` (Marquardt 1963, SIAM J. Appl. Math. 11(2)) and Nielsen's update of `μ`
+from the gain ratio (Nielsen 1999, IMM-REP-1999-05; Madsen, Nielsen & Tingleff 2004,
+*Methods for non-linear least squares problems*, Alg. 3.16); [`MarquardtDamping`][] is
+MATLAB trainlm's `D = I`, `μ ← μ·mu_dec` on success and `μ ← μ·mu_inc` on failure (Hagan
+& Menhaj 1994, IEEE TNN 5(6)). Stopping rules, all relative to `rtol`:
 
 - the undamped Gauss-Newton model predicts less than `rtol · cost` of further reduction,
   or its step is below `rtol` relative to `θ` (see `_newton_converged`): a step kept
@@ -27,6 +36,7 @@ do not make the whole family pay for their steps (a `vmap`-ped `while_loop` runs
 member until the slowest stops), and each block's work stays in the CPU caches.
 """
 
+import abc
 from collections.abc import Callable
 from typing import Any
 
@@ -34,6 +44,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
+from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from ._results import RESULTS
@@ -108,6 +120,54 @@ def batched_while(
     return jax.lax.while_loop(outer_cond, outer_body, state)
 
 
+class AbstractDamping(eqx.Module):
+    """How the damping `μ` of the step `(JᵀJ + μ D) δ = -Jᵀr` is scaled and updated."""
+
+    scaled: eqx.AbstractVar[bool]
+
+    @abc.abstractmethod
+    def update(self, mu: Array, nu: Array, accept: Array, gain: Array) -> tuple[Array, Array]:
+        """`(μ, ν)` after a trial step with gain ratio `gain` (accepted or not)."""
+
+
+class NielsenDamping(AbstractDamping):
+    """Nielsen's gain-ratio update of the damping (the default).
+
+    `μ ← μ · max(1/3, 1 - (2ρ - 1)³)` after an accepted step with gain ratio `ρ`, else
+    `μ ← μ ν`, `ν ← 2ν` (Madsen, Nielsen & Tingleff 2004, Alg. 3.16). `scaled=True`:
+    Marquardt's scaling `D = diag(JᵀJ)` (invariant to the units of the parameters);
+    `False`: Levenberg's `D = I`, which bounds the step in the parameters' own units and
+    so damps weakly determined directions most (right for parameters normalised to O(1),
+    as `calibrate` does)."""
+
+    scaled: bool = True
+
+    def __init__(self, scaled: bool = True):
+        self.scaled = bool(scaled)
+
+    def update(self, mu, nu, accept, gain):
+        mu = jnp.where(accept, mu * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3), mu * nu)
+        return mu, jnp.where(accept, 2.0, 2.0 * nu)
+
+
+class MarquardtDamping(AbstractDamping):
+    """MATLAB trainlm's damping: `D = I`, `μ ← μ·dec` after an accepted step, `μ ← μ·inc`
+    after a rejected one (Hagan & Menhaj 1994; defaults `dec = 0.1`, `inc = 10`)."""
+
+    dec: float = 0.1
+    inc: float = 10.0
+    scaled: bool = False
+
+    def __init__(self, dec: float = 0.1, inc: float = 10.0):
+        if not 0 < dec < 1 < inc:
+            raise ValueError(f"MarquardtDamping: need 0 < dec < 1 < inc; got {dec}, {inc}.")
+        self.dec, self.inc = dec, inc
+
+    def update(self, mu, nu, accept, gain):
+        del gain
+        return jnp.where(accept, mu * self.dec, mu * self.inc), nu
+
+
 class LMState(eqx.Module):
     """Iterate of [`lm_step`][]: the best feasible point, its normal equations, the
     damping `mu` (relative to the unit-diagonal scaled `JᵀJ`) and its growth factor `nu`."""
@@ -123,22 +183,26 @@ class LMState(eqx.Module):
     nonfinite: Bool[Array, ""]
 
 
-def _damped_step(jtj, jtr, mu):
-    """Solve `(JᵀJ + μ D) δ = -Jᵀr`, `D = diag(JᵀJ)`, by Cholesky in unit-diagonal scaling."""
+def _damped_step(jtj, jtr, mu, scaled: bool = True):
+    """Solve `(JᵀJ + μ D) δ = -Jᵀr` by Cholesky: `D = diag(JᵀJ)` in unit-diagonal scaling
+    (`scaled`), else `D = I`."""
+    if not scaled:
+        chol = jnp.linalg.cholesky(jtj + mu * jnp.eye(jtj.shape[0], dtype=jtj.dtype))
+        return jax.scipy.linalg.cho_solve((chol, True), -jtr)
     d = jnp.diagonal(jtj)
     d = jnp.where(d > 0, d, 1.0)
     sc = 1.0 / jnp.sqrt(d)
     m = jtj * sc[:, None] * sc[None, :] + mu * jnp.eye(jtj.shape[0], dtype=jtj.dtype)
     chol = jnp.linalg.cholesky(m)
     y = jax.scipy.linalg.cho_solve((chol, True), -jtr * sc)
-    return y * sc, sc
+    return y * sc
 
 
 def _finite(*xs) -> Array:
     return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in xs]))
 
 
-def _newton_converged(theta, cost, jtj, jtr, rtol) -> Array:
+def _newton_converged(theta, cost, jtj, jtr, rtol, atol=0.0) -> Array:
     """Convergence of the Gauss-Newton model at `θ` (no step needed).
 
     With the undamped step `δ = -(JᵀJ)⁻¹ Jᵀr`: the largest reduction the model predicts,
@@ -146,6 +210,11 @@ def _newton_converged(theta, cost, jtj, jtr, rtol) -> Array:
     fraction of their standard errors of the optimum, however flat some directions are),
     or `δ` is below `rtol` relative to `θ` in the unit-diagonal scaling (zero-residual
     data, where the relative reduction stays O(1) until rounding).
+
+    With `atol > 0` (a Python number) the test is optimistix's Cauchy test instead, per
+    entry: `|δ_i| <= atol + rtol |θ_i|` (the solver [`LevenbergMarquardt`][], whose
+    parameters are normalised to O(1) by `calibrate`); [`lm_step`][] applies it to the
+    step just taken.
     """
     d = jnp.diagonal(jtj)
     sc = 1.0 / jnp.sqrt(jnp.where(d > 0, d, 1.0))
@@ -153,12 +222,15 @@ def _newton_converged(theta, cost, jtj, jtr, rtol) -> Array:
     chol = jnp.linalg.cholesky(m)
     y = jax.scipy.linalg.cho_solve((chol, True), -jtr * sc)  # scaled Newton step
     pred = -0.5 * jnp.dot(jtr * sc, y)
+    if atol > 0:
+        cauchy = jnp.all(jnp.abs(y * sc) <= atol + rtol * jnp.abs(theta))
+        return _finite(y) & cauchy | (cost == 0)
     small_pred = pred <= rtol * cost
     small_step = jnp.linalg.norm(y) <= rtol * (jnp.linalg.norm(theta / sc) + rtol)
     return _finite(y) & (small_pred | small_step) | (cost == 0)
 
 
-def lm_init(evaluate, theta0: Array, args: Any, rtol, mu0: float = 1e-3) -> LMState:
+def lm_init(evaluate, theta0: Array, args: Any, rtol, mu0: float = 1e-3, atol=0.0) -> LMState:
     """State at a starting point (one evaluation of the normal equations)."""
     cost0, jtj0, jtr0 = evaluate(theta0, args)
     dtype = theta0.dtype
@@ -171,7 +243,7 @@ def lm_init(evaluate, theta0: Array, args: Any, rtol, mu0: float = 1e-3) -> LMSt
         mu=jnp.asarray(mu0, dtype),
         nu=jnp.asarray(2.0, dtype),
         num_steps=jnp.asarray(0),
-        converged=finite & _newton_converged(theta0, cost0, jtj0, jtr0, rtol),
+        converged=finite & _newton_converged(theta0, cost0, jtj0, jtr0, rtol, atol),
         nonfinite=~finite,
     )
 
@@ -181,27 +253,56 @@ def lm_running(state: LMState, max_steps) -> Bool[Array, ""]:
     return (~state.converged) & (~state.nonfinite) & (state.num_steps < max_steps)
 
 
-def lm_step(evaluate, feasible, state: LMState, args: Any, rtol) -> LMState:
-    """One trial step: solve, shorten to the feasible set, evaluate, accept or reject."""
+def _always(theta) -> Array:
+    return jnp.asarray(True)
+
+
+def lm_step(
+    evaluate,
+    feasible,
+    state: LMState,
+    args: Any,
+    rtol,
+    damping: AbstractDamping = NielsenDamping(),
+    cost: Callable | None = None,
+    atol=0.0,
+) -> LMState:
+    """One trial step: solve, shorten to the feasible set, evaluate, accept or reject.
+
+    **Arguments:**
+
+    - `evaluate(θ, args) -> (cost, JᵀJ, Jᵀr)`: the normal equations, `cost = ½‖r‖²`.
+    - `feasible(θ) -> bool` (or `None`): the open admissible set.
+    - `state`, `args`: the iterate and the problem's data.
+    - `rtol`: relative tolerance of the stopping rules (module doc); `atol`: absolute
+      floor of the Newton step (converged when every entry is below it; default 0).
+    - `damping`: the damping policy ([`NielsenDamping`][] or [`MarquardtDamping`][]).
+    - `cost(θ, args) -> ½‖r‖²` (optional): a cheaper cost; the trial is then judged by it
+      and the normal equations are formed only for an accepted trial (trainlm's epoch:
+      several trials, one `JᵀJ`).
+    """
     s = state
-    delta, sc = _damped_step(s.jtj, s.jtr, s.mu)
+    feasible = _always if feasible is None else feasible
+    delta = _damped_step(s.jtj, s.jtr, s.mu, damping.scaled)
     ok = jax.vmap(lambda t: feasible(s.theta + t * delta))(jnp.asarray(_FRACTIONS, delta.dtype))
     frac = jnp.max(jnp.where(ok, _FRACTIONS, 0.0))
     delta = frac * delta
     trial = s.theta + delta
-    cost_t, jtj_t, jtr_t = evaluate(trial, args)
+    if cost is None:
+        cost_t, jtj_t, jtr_t = evaluate(trial, args)
+    else:
+        cost_t = cost(trial, args)
+        good = jnp.isfinite(cost_t) & (cost_t < s.cost) & (frac > 0)
+        _, jtj_t, jtr_t = jax.lax.cond(
+            good, lambda: evaluate(trial, args), lambda: (cost_t, s.jtj, s.jtr)
+        )
     # Predicted reduction of the Gauss-Newton model: -(gᵀδ + ½ δᵀ JᵀJ δ) > 0.
     pred = -(jnp.dot(s.jtr, delta) + 0.5 * jnp.dot(delta, s.jtj @ delta))
     actual = s.cost - cost_t
     finite = _finite(cost_t, jtj_t, jtr_t, delta)
     accept = finite & (actual > 0) & (frac > 0)
     gain = actual / jnp.where(pred > 0, pred, 1.0)
-    mu = jnp.where(
-        accept,
-        s.mu * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3),
-        s.mu * s.nu,
-    )
-    nu = jnp.where(accept, 2.0, 2.0 * s.nu)
+    mu, nu = damping.update(s.mu, s.nu, accept, gain)
     pick = lambda new, old: jnp.where(accept, new, old)
     theta, cost, jtj, jtr = (
         pick(trial, s.theta),
@@ -214,7 +315,15 @@ def lm_step(evaluate, feasible, state: LMState, args: Any, rtol) -> LMState:
     # of more than rtol (in particular when no fraction of it is feasible). Following
     # the boundary further by raising the damping gains ~1e-6 relative in many steps.
     at_boundary = (frac < 1) & (pred <= rtol * s.cost)
-    converged = at_boundary | _newton_converged(theta, cost, jtj, jtr, rtol)
+    if atol > 0:
+        # optimistix's Cauchy test on the step just proposed: once a step is below
+        # atol + rtol |θ| per entry, either it was taken (and the quadratic convergence of
+        # Gauss-Newton has put θ well inside that tolerance) or it was rejected at the
+        # rounding floor of the cost (a noisy optimum, where every step is rejected).
+        small = jnp.all(jnp.abs(delta) <= atol + rtol * jnp.abs(theta))
+        converged = at_boundary | small | (cost == 0)
+    else:
+        converged = at_boundary | _newton_converged(theta, cost, jtj, jtr, rtol)
     return LMState(
         theta=theta,
         cost=cost,
@@ -236,3 +345,105 @@ def lm_result(state: LMState) -> RESULTS:
         RESULTS.nonfinite,
         RESULTS.where(state.converged, RESULTS.successful, RESULTS.max_steps_reached),
     )
+
+
+# ----------------------------------------------------------------------------- optimistix
+
+
+def jacobian_normal_equations(fn: Callable) -> Callable:
+    """`evaluate(θ, args) -> (½‖r‖², JᵀJ, Jᵀr)` from a residual `fn(θ, args) -> r` on a
+    flat `θ`, with the Jacobian in forward mode (one JVP per parameter)."""
+
+    def evaluate(theta, args):
+        r, jac = jax.vmap(
+            lambda v: jax.jvp(lambda t: fn(t, args), (theta,), (v,)), out_axes=(None, 0)
+        )(jnp.eye(theta.shape[0], dtype=theta.dtype))
+        return 0.5 * jnp.sum(r**2), jac @ jac.T, jac @ r
+
+    return evaluate
+
+
+class _SolverState(eqx.Module):
+    lm: LMState
+    has_aux: bool = eqx.field(static=True)
+
+
+class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
+    """The jaxvs Levenberg-Marquardt as an optimistix least-squares solver.
+
+    Use it anywhere optimistix takes a solver (`optimistix.least_squares`, and
+    `jaxvs.calibrate`, where it is the default). It steps with [`lm_step`][] (module doc:
+    scaled damping, Nielsen's update, relative stopping rules).
+
+    **Arguments:**
+
+    - `rtol`: relative tolerance of the stopping rule (below).
+    - `atol`: with `atol > 0` (default `1e-8`) the stopping rule is optimistix's Cauchy
+      test on the Gauss-Newton step, per entry `|δ_i| <= atol + rtol |θ_i|`; with
+      `atol = 0` the relative rules of the module doc.
+    - `damping`: [`NielsenDamping`][] (default: `scaled=False`, Levenberg's `D = I` on
+      the normalised parameters of `calibrate`) or [`MarquardtDamping`][].
+    - `mu0`: initial damping (default 1: a first step no longer than O(1) in normalised
+      parameters).
+    - `norm`: the norm optimistix reports with (unused by the stopping rules).
+
+    `options` of the solve may hold `"normal_equations"`, a structured
+    `evaluate(θ, args) -> (½‖r‖², JᵀJ, Jᵀr)` on the flattened parameters (default: from
+    forward-mode Jacobians), and `"feasible"`, a predicate of the flattened parameters
+    (steps are shortened to stay inside).
+    """
+
+    rtol: float
+    atol: float
+    norm: Callable[[PyTree], Array] = optx.max_norm
+    damping: AbstractDamping = NielsenDamping(scaled=False)
+    mu0: float = 1.0
+
+    def __init__(
+        self,
+        rtol: float = 1e-8,
+        atol: float = 1e-8,
+        damping: AbstractDamping = NielsenDamping(scaled=False),
+        norm: Callable[[PyTree], Array] = optx.max_norm,
+        mu0: float = 1.0,
+    ):
+        if not rtol > 0:
+            raise ValueError(f"LevenbergMarquardt: rtol must be > 0; got {rtol!r}.")
+        if not atol >= 0:
+            raise ValueError(f"LevenbergMarquardt: atol must be >= 0; got {atol!r}.")
+        self.rtol, self.atol, self.damping, self.norm = float(rtol), float(atol), damping, norm
+        self.mu0 = float(mu0)
+
+    def _problem(self, fn, y, args, options):
+        options = {} if options is None else options
+        flat, unravel = ravel_pytree(y)
+
+        def residual(theta, a):
+            r, _ = fn(unravel(theta), a)
+            return ravel_pytree(r)[0]
+
+        evaluate = options.get("normal_equations") or jacobian_normal_equations(residual)
+        return flat, unravel, evaluate, options.get("feasible")
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        flat, _, evaluate, _ = self._problem(fn, y, args, options)
+        return _SolverState(
+            lm_init(evaluate, flat, args, self.rtol, self.mu0, atol=self.atol),
+            aux_struct is not None,
+        )
+
+    def step(self, fn, y, args, options, state, tags):
+        _, unravel, evaluate, feasible = self._problem(fn, y, args, options)
+        lm = lm_step(evaluate, feasible, state.lm, args, self.rtol, self.damping, atol=self.atol)
+        y_new = unravel(lm.theta)
+        aux = fn(y_new, args)[1] if state.has_aux else None
+        return y_new, _SolverState(lm, state.has_aux), aux
+
+    def terminate(self, fn, y, args, options, state, tags):
+        lm = state.lm
+        done = lm.converged | lm.nonfinite
+        result = optx.RESULTS.where(lm.nonfinite, optx.RESULTS.nonfinite, optx.RESULTS.successful)
+        return done, result
+
+    def postprocess(self, fn, y, aux, args, options, state, tags, result):
+        return y, aux, {"num_steps": state.lm.num_steps}

@@ -297,8 +297,9 @@ class SimulationError(_AbstractTimeResidual):
 
     - `fn`: optional `fn(model, data) -> ŷ` giving the simulated output (`data` is the
       prepared dict with `"u"`, `"y"`, `"dt"`). Default: `jaxvs.simulate(model, u, dt,
-      method=method)` for linear models, otherwise `model.simulate(u, dt)` (implement
-      that method on your `eqx.Module`, e.g. a diffrax ODE solve).
+      method=method)` for linear models, otherwise `model.predict(u, dt)` of any
+      [`jaxvs.models.AbstractModel`][] (derive your module from it, e.g. a diffrax ODE
+      solve).
     - `inputs`, `outputs`: signal name(s) in the data (default `"u"` and `"y"`); a tuple
       of names stacks them as `(time, signal)`.
     - `method`: discretisation of `jaxvs.simulate` (`"zoh"`, `"tustin"`, `"euler"`,

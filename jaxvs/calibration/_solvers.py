@@ -7,6 +7,8 @@ import equinox as eqx
 import optax
 import optimistix as optx
 
+from ._lm import LevenbergMarquardt
+
 __all__ = ["SOLVER_NAMES", "make_solver"]
 
 SOLVER_NAMES = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs")
@@ -32,23 +34,34 @@ class _StaticOptax(eqx.Module):
         return optax.with_extra_args_support(self.transform).update(updates, state, params, **extra)
 
 
-def make_solver(solver: Any, rtol: float, atol: float) -> Any:
+def make_solver(solver: Any, rtol: float | None, atol: float | None) -> Any:
     """Turn the user's `solver` argument into an optimistix solver.
 
     **Arguments:**
 
-    - `solver`: `None` (Levenberg-Marquardt), an `optimistix.AbstractLeastSquaresSolver`
-      (used as is), an `optimistix.AbstractMinimiser` (e.g. `optimistix.BFGS`; it
-      minimises `0.5 Σ r²`), an `optax.GradientTransformation` (e.g. `optax.adam(1e-2)`,
-      wrapped in `optimistix.OptaxMinimiser`), or one of the names in `SOLVER_NAMES`.
-    - `rtol`, `atol`: tolerances used when the solver is built here.
+    - `solver`: `None` (jaxvs's [`LevenbergMarquardt`][]), an
+      `optimistix.AbstractLeastSquaresSolver` (used as is), an
+      `optimistix.AbstractMinimiser` (e.g. `optimistix.BFGS`; it minimises `0.5 Σ r²`),
+      an `optax.GradientTransformation` (e.g. `optax.adam(1e-2)`, wrapped in
+      `optimistix.OptaxMinimiser`), or one of the names in `SOLVER_NAMES`.
+    - `rtol`, `atol`: tolerances of a solver built here from `None` or a name (default
+      `1e-8` each). A solver object carries its own: giving both is an error, never
+      silently ignored.
 
     **Returns:**
 
     An optimistix least-squares solver or minimiser.
     """
+    if not (solver is None or isinstance(solver, str)) and (rtol, atol) != (None, None):
+        raise ValueError(
+            "calibrate: rtol/atol were given together with a solver object, whose own "
+            "tolerances would win; set them on the solver instead (e.g. "
+            "jaxvs.calibration.LevenbergMarquardt(rtol=1e-10, atol=1e-10))."
+        )
+    rtol = 1e-8 if rtol is None else rtol
+    atol = 1e-8 if atol is None else atol
     if solver is None or solver in ("levenberg_marquardt", "lm"):
-        return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+        return LevenbergMarquardt(rtol=rtol, atol=atol)
     if isinstance(solver, str):
         if solver == "gauss_newton":
             return optx.GaussNewton(rtol=rtol, atol=atol)

@@ -9,8 +9,10 @@ inputs, and Levenberg-Marquardt (MATLAB `trainlm`) or Adam training of the netwo
    cache-sized chunks, without forming `J` (about 3× fewer flops than `JᵀJ` for the
    study's TDNN); for other modules from the batched Jacobian (a `vmap` of per-sample
    reverse-mode gradients);
-2. the damped step `(JᵀJ + μ I) δ = -Jᵀe` by Cholesky, with `μ` multiplied by `mu_inc`
-   until the step reduces the MSE and by `mu_dec` after a successful step (Hagan &
+2. the damped step `(JᵀJ + μ I) δ = -Jᵀe` by Cholesky -- jaxvs's one Levenberg-Marquardt
+   kernel (`jaxvs.calibration.lm_step`) with trainlm's `MarquardtDamping` --, with `μ`
+   multiplied by `mu_inc` until the step reduces the MSE and by `mu_dec` after a
+   successful step (Hagan &
    Menhaj 1994, "Training feedforward networks with the Marquardt algorithm", IEEE TNN
    5(6); MATLAB `trainlm` defaults `mu = 1e-3, mu_dec = 0.1, mu_inc = 10, mu_max = 1e10`);
 3. early stopping on a validation block: training stops after `max_fail` consecutive
@@ -32,7 +34,14 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from ..._misc import timed_call
-from ...calibration import ExcitationWarning
+from ...calibration import (
+    RESULTS,
+    ExcitationWarning,
+    LMState,
+    MarquardtDamping,
+    lm_init,
+    lm_step,
+)
 from ...models import BiasFreeRegression, Perceptron
 
 __all__ = [
@@ -80,6 +89,23 @@ class TrainResult(eqx.Module):
     @property
     def stop_reason(self) -> str:
         return STOP_REASONS[int(self.stop)]
+
+    @property
+    def result(self) -> RESULTS:
+        """Why training stopped, as a code of jaxvs's one `RESULTS` enumeration
+        (`max_steps_reached` for the epoch budget, `validation_stop`, `damping_limit`,
+        `gradient_small`, `goal_reached`)."""
+        codes = (
+            RESULTS.max_steps_reached,
+            RESULTS.validation_stop,
+            RESULTS.damping_limit,
+            RESULTS.gradient_small,
+            RESULTS.goal_reached,
+        )
+        out = codes[0]
+        for i, code in enumerate(codes[1:], start=1):
+            out = RESULTS.where(self.stop == i, code, out)
+        return out
 
     @property
     def time_per_epoch(self) -> float:
@@ -190,10 +216,7 @@ def _train(impl, args) -> TrainResult:
 
 
 class _LMState(eqx.Module):
-    theta: Array
-    e: Array
-    mu: Array
-    mse: Array
+    lm: LMState
     epoch: Array
     train_hist: Array
     val_hist: Array
@@ -224,6 +247,7 @@ def _lm_impl(
 ):
     theta0, unravel, static = _split(net)
     scale2 = net.y_scale**2
+    n = X.shape[0]
 
     def predict(theta, x):
         return eqx.combine(unravel(theta), static)(x)
@@ -239,7 +263,10 @@ def _lm_impl(
 
     # Gauss-Newton normal equations: the perceptron's structured form (JᵀJ from the
     # Kronecker structure of its Jacobian rows, chunked, J never formed), or for other
-    # modules the batched Jacobian of per-sample reverse-mode gradients.
+    # modules the batched Jacobian of per-sample reverse-mode gradients. JᵀJ is the
+    # dominant cost; gram_dtype=float32 halves it at ~1e-7 relative accuracy of the
+    # Gauss-Newton matrix, while the Cholesky solve and the accept test stay in the data's
+    # precision.
     if isinstance(net.perceptron, Perceptron):
 
         def normal_equations(theta, e):
@@ -253,18 +280,23 @@ def _lm_impl(
             Jg = J.astype(gram)
             return (Jg.T @ Jg).astype(J.dtype), J.T @ e
 
-    eye = jnp.eye(theta0.shape[0], dtype=theta0.dtype)
-    n = X.shape[0]
+    # The one LM kernel (jaxvs.calibration.lm_step) with trainlm's damping: trials are
+    # judged by the cheap cost; the normal equations are formed once per accepted step.
+    def cost(theta, _):
+        return 0.5 * jnp.sum((outputs(theta, X) - yn) ** 2)
 
-    e0 = outputs(theta0, X) - yn
-    mse0 = jnp.mean(e0**2)
+    def evaluate(theta, _):
+        e = outputs(theta, X) - yn
+        jtj, jtr = normal_equations(theta, e)
+        return 0.5 * jnp.sum(e**2), jtj, jtr
+
+    damping = MarquardtDamping(mu_dec, mu_inc)
+    lm0 = lm_init(evaluate, theta0, None, 0.0, mu0)
+    mse0 = 2.0 * lm0.cost / n
     val0 = jnp.where(has_val, mse(theta0, Xv, yvn), jnp.nan)
     hist = jnp.full((max_epochs + 1,), jnp.nan, theta0.dtype)
     s0 = _LMState(
-        theta=theta0,
-        e=e0,
-        mu=jnp.asarray(mu0, theta0.dtype),
-        mse=mse0,
+        lm=lm0,
         epoch=jnp.asarray(0),
         train_hist=hist.at[0].set(mse0 * scale2),
         val_hist=hist.at[0].set(val0 * scale2),
@@ -277,37 +309,25 @@ def _lm_impl(
     )
 
     def epoch(s: _LMState) -> _LMState:
-        # JᵀJ is the dominant cost; gram_dtype=float32 halves it at ~1e-7 relative
-        # accuracy of the Gauss-Newton matrix, while the Cholesky solve and the accept
-        # test stay in the data's precision.
-        H, g = normal_equations(s.theta, s.e)
-        grad_norm = jnp.linalg.norm(2.0 * g / n)
+        grad_norm = jnp.linalg.norm(2.0 * s.lm.jtr / n)
 
+        # trainlm's epoch: trial steps with growing damping until one reduces the error.
         def trial_cond(c):
-            mu, _, _, _, ok = c
-            return (~ok) & (mu <= mu_max)
+            lm, ok = c
+            return (~ok) & (lm.mu <= mu_max)
 
         def trial(c):
-            mu, _, _, _, _ = c
-            chol = jnp.linalg.cholesky(H + mu * eye)
-            delta = -jax.scipy.linalg.cho_solve((chol, True), g)
-            th = s.theta + delta
-            e = outputs(th, X) - yn
-            m = jnp.mean(e**2)
-            ok = jnp.isfinite(m) & (m < s.mse)
-            return jnp.where(ok, mu * mu_dec, mu * mu_inc), th, e, m, ok
+            lm, _ = c
+            new = lm_step(evaluate, None, lm, None, 0.0, damping, cost=cost)
+            return new, new.cost < lm.cost
 
-        mu, th, e, m, ok = jax.lax.while_loop(
-            trial_cond, trial, (s.mu, s.theta, s.e, s.mse, jnp.asarray(False))
-        )
-        theta = jnp.where(ok, th, s.theta)
-        e = jnp.where(ok, e, s.e)
-        m = jnp.where(ok, m, s.mse)
+        lm, ok = jax.lax.while_loop(trial_cond, trial, (s.lm, jnp.asarray(False)))
+        m = 2.0 * lm.cost / n
         k = s.epoch + 1
-        v = jnp.where(has_val, mse(theta, Xv, yvn), jnp.nan)
+        v = jnp.where(has_val, mse(lm.theta, Xv, yvn), jnp.nan)
         better = has_val & (v < s.best_val)
         fails = jnp.where(better, 0, s.fails + 1)
-        best_theta = jnp.where(better | ~has_val, theta, s.best_theta)
+        best_theta = jnp.where(better | ~has_val, lm.theta, s.best_theta)
         best_val = jnp.where(better, v, s.best_val)
         best_epoch = jnp.where(better | ~has_val, k, s.best_epoch)
         stop = jnp.where(
@@ -325,10 +345,7 @@ def _lm_impl(
         )
         running = (stop == _MAX_EPOCHS) & (k < max_epochs)
         return _LMState(
-            theta=theta,
-            e=e,
-            mu=mu,
-            mse=m,
+            lm=lm,
             epoch=k,
             train_hist=s.train_hist.at[k].set(m * scale2),
             val_hist=s.val_hist.at[k].set(v * scale2),
@@ -407,8 +424,8 @@ def train_lm(
         max_epochs,
         max_fail,
         jnp.asarray(mu, f),
-        jnp.asarray(mu_dec, f),
-        jnp.asarray(mu_inc, f),
+        float(mu_dec),  # static: the damping policy is part of the compiled loop
+        float(mu_inc),
         jnp.asarray(mu_max, f),
         jnp.asarray(min_grad, f),
         jnp.asarray(goal, f),
