@@ -57,3 +57,103 @@ LINEAR_MODELS = [
     ),
     ("statespace", lambda rng: random_modal(rng, 3).to_state_space()),
 ]
+
+
+# ----------------------------------------------------------------------------- every model
+class ModelCase:
+    """One registry entry: a model, one experiment's input `u` at sample time `dt`, the
+    identifiable parameters `free(model) -> leaves` for recovery and gradient checks, and
+    documented construction errors `[(callable, exception, match)]`."""
+
+    def __init__(self, model, u, dt, free, errors=(), rtol=1e-6):
+        self.model, self.u, self.dt, self.free, self.errors = model, u, dt, free, list(errors)
+        self.rtol = rtol  # recovery tolerance (noiseless data; diffrax models: its rtol)
+
+
+def _prbs(n, seed=0):
+    rng = np.random.default_rng(seed)
+    return jnp.asarray(np.repeat(rng.choice([-1.0, 1.0], size=n // 10), 10))
+
+
+def _first_order():
+    m = jaxvs.models.FirstOrder(20.0, 5.0, 30.0)
+    # a function of time only: u sets the length (a PRBS, so no ExcitationWarning)
+    return ModelCase(m, _prbs(100), 1.0, lambda m: (m.T0, m.k, m.T1))
+
+
+def _piecewise():
+    m = jaxvs.models.PiecewiseFirstOrder([0.0, 50.0], [20.0, 24.0], [5.0, -3.0], [20.0, 10.0])
+    errors = [
+        (
+            lambda: jaxvs.models.PiecewiseFirstOrder([0, 50.0], [20.0], [5.0, -3], [20.0, 10]),
+            ValueError,
+            "same length",
+        )
+    ]
+    return ModelCase(m, _prbs(100), 1.0, lambda m: (m.k, m.T1), errors)
+
+
+def _driven():
+    m = jaxvs.models.DrivenFirstOrder(20.0, 0.002, 40.0)
+    u = jnp.asarray(np.repeat([1000.0, 3000.0, 2000.0, 500.0], 50))
+    return ModelCase(m, u, 1.0, lambda m: (m.K, m.T1), [], rtol=1e-4)
+
+
+def _regression():
+    m = jaxvs.models.BiasFreeRegression([0.8, -0.3], 1.5, [20.0, 10.0])
+    u = jnp.stack([20 + _prbs(100), 10 + _prbs(100, 1)], axis=1)
+    return ModelCase(m, u, 1.0, lambda m: (m.coef, m.intercept), [])
+
+
+def _network(cls, **kw):
+    import jax.random as jr
+
+    m = cls(2, 4, key=jr.key(0), **kw)
+    u = jnp.asarray(np.random.default_rng(3).normal(size=(100, 2)))  # rich in amplitude
+    # the output layer is linear in its weights: identifiable from noiseless data
+    return ModelCase(m, u, 1.0, lambda m: (m.perceptron.W2, m.perceptron.b2), [])
+
+
+def _virtual_sensor():
+    tmf = jaxvs.RationalTF(jnp.array([1.0, 40.0, 4e4]), jnp.array([1.0, 60.0, 4e4]))
+    m = jaxvs.VirtualSensor(tmf)
+    return ModelCase(m, 1e-3 * _prbs(200), 1e-3, lambda m: (m.tmf.num,), [])
+
+
+def _drive_axis():
+    from jaxvs.models import (
+        DriveAxis,
+        ForceGain,
+        PositionLoop,
+        RigidAxis,
+        VelocityLoop,
+        ViscousFriction,
+    )
+
+    m = DriveAxis(
+        RigidAxis(10.0, ViscousFriction(50.0)), PositionLoop(40.0), VelocityLoop(2000.0),
+        ForceGain(1.0),
+    )
+    u = jnp.asarray(np.r_[0.0, np.full(99, 1e-3)])
+    return ModelCase(m, u, 1e-3, lambda m: (m.mechanics.mass,), [], rtol=1e-4)
+
+
+# Every concrete jaxvs.models.AbstractModel, as (name, factory) pairs; a new model class is
+# added here and gets the jit / vmap / gradient / recovery / error tests of
+# tests/test_models_registry.py (which fails while a model class is missing).
+MODELS = [
+    ("rational", lambda: ModelCase(random_rational(np.random.default_rng(0), 4), _prbs(200), 1e-3,
+                                   lambda m: (m.num,), [])),
+    ("modal", lambda: ModelCase(random_modal(np.random.default_rng(1), 2), _prbs(200), 1e-3,
+                                lambda m: (m.omega_n, m.zeta), [])),
+    ("statespace", lambda: ModelCase(random_modal(np.random.default_rng(2), 2).to_state_space(),
+                                     _prbs(200), 1e-3, lambda m: (m.C,), [])),
+    ("first_order", _first_order),
+    ("piecewise_first_order", _piecewise),
+    ("driven_first_order", _driven),
+    ("bias_free_regression", _regression),
+    ("static_network", lambda: _network(jaxvs.models.StaticNetwork)),
+    ("time_delay_network", lambda: _network(jaxvs.models.TimeDelayNetwork)),
+    ("virtual_sensor", _virtual_sensor),
+    ("drive_axis", _drive_axis),
+]

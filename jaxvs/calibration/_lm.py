@@ -316,12 +316,14 @@ def lm_step(
     # the boundary further by raising the damping gains ~1e-6 relative in many steps.
     at_boundary = (frac < 1) & (pred <= rtol * s.cost)
     if atol > 0:
-        # optimistix's Cauchy test on the step just proposed: once a step is below
-        # atol + rtol |θ| per entry, either it was taken (and the quadratic convergence of
-        # Gauss-Newton has put θ well inside that tolerance) or it was rejected at the
-        # rounding floor of the cost (a noisy optimum, where every step is rejected).
+        # optimistix's Cauchy test, per entry |δ_i| <= atol + rtol |θ_i|, on the step just
+        # taken (the quadratic convergence of Gauss-Newton has then put θ well inside the
+        # tolerance) or on the undamped Newton step from θ (a noisy optimum, where steps
+        # are rejected at the rounding floor of the cost). A step kept small only by the
+        # damping is never taken for convergence.
         small = jnp.all(jnp.abs(delta) <= atol + rtol * jnp.abs(theta))
-        converged = at_boundary | small | (cost == 0)
+        newton = _newton_converged(theta, cost, jtj, jtr, rtol, atol)
+        converged = at_boundary | (accept & small) | newton
     else:
         converged = at_boundary | _newton_converged(theta, cost, jtj, jtr, rtol)
     return LMState(
@@ -383,8 +385,9 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
       `atol = 0` the relative rules of the module doc.
     - `damping`: [`NielsenDamping`][] (default: `scaled=False`, Levenberg's `D = I` on
       the normalised parameters of `calibrate`) or [`MarquardtDamping`][].
-    - `mu0`: initial damping (default 1: a first step no longer than O(1) in normalised
-      parameters).
+    - `mu0`: initial damping `τ`; with `D = I` the damping starts at `τ max diag(JᵀJ)`
+      (default `τ = 1`: a cautious first step, as the weakly determined directions of a
+      calibration need).
     - `norm`: the norm optimistix reports with (unused by the stopping rules).
 
     `options` of the solve may hold `"normal_equations"`, a structured
@@ -427,10 +430,15 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         flat, _, evaluate, _ = self._problem(fn, y, args, options)
-        return _SolverState(
-            lm_init(evaluate, flat, args, self.rtol, self.mu0, atol=self.atol),
-            aux_struct is not None,
-        )
+        state = lm_init(evaluate, flat, args, self.rtol, self.mu0, atol=self.atol)
+        if not self.damping.scaled:
+            # D = I: the damping relative to the largest curvature, μ0 = τ max diag(JᵀJ)
+            # (Madsen, Nielsen & Tingleff 2004, §3.2), so the first step does not depend
+            # on the units of the residual.
+            d = jnp.max(jnp.diagonal(state.jtj))
+            mu = self.mu0 * jnp.where(jnp.isfinite(d) & (d > 0), d, 1.0)
+            state = eqx.tree_at(lambda st: st.mu, state, mu.astype(state.mu.dtype))
+        return _SolverState(state, aux_struct is not None)
 
     def step(self, fn, y, args, options, state, tags):
         _, unravel, evaluate, feasible = self._problem(fn, y, args, options)

@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._base import AbstractModel
 from .._nonlinear_simulate import (
     check_step,
     finite_or_error,
@@ -316,7 +317,7 @@ class DriveResponse(eqx.Module):
     states: Array
 
 
-class DriveAxis(eqx.Module):
+class DriveAxis(AbstractModel):
     r"""A cascade-controlled feed drive (see the module docstring for the block diagram).
 
     **Arguments:**
@@ -577,6 +578,11 @@ class DriveAxis(eqx.Module):
             raise ValueError(f"frequency_response: output must be one of {tuple(idx)}.")
         H = frequency_response(self.linearise(), jnp.asarray(omega))
         return H[:, idx[output], 0]
+
+    def predict(self, u: Float[ArrayLike, " time"], dt: float) -> Float[Array, " time"]:
+        """Table position [m] following the position reference `u` [m] sampled every `dt`
+        [s] (the closed loop of [`simulate`][], from rest)."""
+        return self.simulate(u, dt, check=False).position
 
     # ------------------------------------------------------------------ simulation
     def simulate(

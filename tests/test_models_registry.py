@@ -1,0 +1,108 @@
+"""Every model of jaxvs (tests/helpers.py MODELS) through the same checks: the registry is
+complete, `predict` under jit and vmap, gradients against finite differences, recovery of
+known parameters by `calibrate`, and the documented construction errors."""
+
+import inspect
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import MODELS
+
+import jaxvs
+from jaxvs.calibration import SimulationError
+
+CASES = [pytest.param(factory, id=name) for name, factory in MODELS]
+
+
+def _concrete_models():
+    out = set()
+    for name in dir(jaxvs.models):
+        obj = getattr(jaxvs.models, name)
+        if (
+            inspect.isclass(obj)
+            and issubclass(obj, jaxvs.models.AbstractModel)
+            and not inspect.isabstract(obj)
+            and not name.startswith("Abstract")
+        ):
+            out.add(obj)
+    return out
+
+
+def test_registry_holds_every_model():
+    registered = {type(factory().model) for _, factory in MODELS}
+    missing = _concrete_models() - registered
+    assert not missing, f"add these models to tests/helpers.py MODELS: {missing}"
+
+
+def _scale_free(case, factor):
+    leaves = case.free(case.model)
+    return eqx.tree_at(case.free, case.model, [leaf * factor for leaf in leaves])
+
+
+@pytest.mark.parametrize("factory", CASES)
+def test_predict_jit_and_vmap(factory):
+    case = factory()
+    eager = case.model.predict(case.u, case.dt)
+    assert eager.shape[0] == case.u.shape[0] and bool(jnp.all(jnp.isfinite(eager)))
+    jitted = eqx.filter_jit(lambda m, u: m.predict(u, case.dt))(case.model, case.u)
+    np.testing.assert_allclose(jitted, eager, rtol=1e-9, atol=1e-12)  # same arithmetic
+    # a family of two parameter sets in one vmapped call equals two calls
+    other = _scale_free(case, 1.02)
+    dyn = [eqx.filter(m, eqx.is_inexact_array) for m in (case.model, other)]
+    static = eqx.filter(case.model, eqx.is_inexact_array, inverse=True)
+    stacked = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), *dyn)
+    both = eqx.filter_vmap(lambda d: eqx.combine(d, static).predict(case.u, case.dt))(stacked)
+    np.testing.assert_allclose(both[0], eager, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(both[1], other.predict(case.u, case.dt), rtol=1e-7, atol=1e-12)
+
+
+@pytest.mark.parametrize("factory", CASES)
+def test_gradient_matches_finite_differences(factory):
+    case = factory()
+    leaves = case.free(case.model)
+    weights = jnp.cos(jnp.arange(case.u.shape[0]) * 0.37)
+
+    def loss(ls):
+        y = eqx.tree_at(case.free, case.model, ls).predict(case.u, case.dt)
+        return jnp.sum(weights * jnp.reshape(y, (y.shape[0], -1))[:, 0])
+
+    for i, leaf in enumerate(leaves):
+        flat = np.asarray(leaf).ravel()
+        j = int(np.argmax(np.abs(flat)))  # the largest entry: a well-scaled direction
+        h = 1e-6 * max(abs(flat[j]), 1.0)
+        e = jnp.zeros(flat.size).at[j].set(1.0).reshape(leaf.shape)
+        tangent = [e if k == i else jnp.zeros_like(lf) for k, lf in enumerate(leaves)]
+        # forward mode: every model (diffrax ones use a ForwardMode adjoint, as LM needs)
+        _, g = jax.jvp(loss, (list(leaves),), (tangent,))
+        up = [lf + h * e if k == i else lf for k, lf in enumerate(leaves)]
+        dn = [lf - h * e if k == i else lf for k, lf in enumerate(leaves)]
+        fd = (float(loss(up)) - float(loss(dn))) / (2 * h)
+        # central differences: O(h²) truncation plus rounding ~1e-16·|loss|/h
+        assert float(g) == pytest.approx(fd, rel=1e-4, abs=1e-6 * (abs(fd) + 1.0)), (i, g, fd)
+
+
+@pytest.mark.parametrize("factory", CASES)
+def test_recovers_known_parameters(factory):
+    case = factory()
+    y = case.model.predict(case.u, case.dt)
+    guess = _scale_free(case, 1.05)
+    out = jaxvs.calibrate(
+        guess, {"u": case.u, "y": y, "dt": case.dt}, SimulationError(), free=case.free
+    )
+    truth = jnp.concatenate([jnp.ravel(leaf) for leaf in case.free(case.model)])
+    got = jnp.concatenate([jnp.ravel(leaf) for leaf in case.free(out.model)])
+    # noiseless data: the truth is the optimum, to the solver / integrator tolerance
+    np.testing.assert_allclose(got, truth, rtol=case.rtol, atol=case.rtol * 1e-3)
+
+
+@pytest.mark.parametrize("factory", CASES)
+def test_documented_errors(factory):
+    case = factory()
+    for build, exc, match in case.errors:
+        with pytest.raises(exc, match=match):
+            build()
+    with pytest.raises(TypeError):  # predict needs the sample time
+        case.model.predict(case.u)  # type: ignore[call-arg]
