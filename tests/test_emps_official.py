@@ -239,6 +239,7 @@ def test_position_force_is_a_legendre_series():
     np.testing.assert_allclose(force(q), expected, rtol=1e-13)
 
 
+@pytest.mark.slow
 def test_multiple_shooting_recovers_parameters():
     # noiseless synthetic record of a known axis with a position force; recover it from a
     # guess 10-30 % off
