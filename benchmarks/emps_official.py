@@ -131,6 +131,16 @@ STRUCTURES = {
 }
 
 
+# A last free-run (single-shooting) stage on top of multiple shooting: the whole record as
+# one segment, its initial state fixed at the 20-sample estimate, exactly the benchmark's
+# protocol, so the training objective is the metric itself.
+REFINED = ("Coulomb + viscous + offset", "asymmetric + offset")
+REFINE_SUFFIX = ", + free-run refinement"
+REFINE_STEPS = 30
+for _name in REFINED:
+    STRUCTURES[_name + REFINE_SUFFIX] = STRUCTURES[_name]
+
+
 def _feasible(m):
     return m.mechanics.mass > 0
 
@@ -149,6 +159,40 @@ def _fit(model, free, u, y, max_steps):
         feasible=_feasible,
         max_steps=max_steps,
     )
+
+
+def _calibrate(name, u, y, max_steps):
+    """Multiple shooting, then (refined variants) free-run output error from the
+    window-estimated state; returns the model and the solver statistics."""
+    make, free = STRUCTURES[name]
+    fits = [_fit(make(), free, u, y, max_steps)]
+    if name.endswith(REFINE_SUFFIX):
+        fits.append(
+            fit_multiple_shooting(
+                fits[0].model,
+                u,
+                y,
+                segment_length=len(u) - EMPS.init_window,
+                init_window=EMPS.init_window,
+                free=free,
+                output_scale=1e-3,
+                free_states=False,
+                feasible=_feasible,
+                max_steps=max(1, max_steps * REFINE_STEPS // 100),
+            )
+        )
+    last = fits[-1]
+    info = {
+        "n_parameters": last.n_parameters,
+        "run_s": sum(f.run_s for f in fits),
+        "compile_s": sum(f.compile_s for f in fits),
+        "lm_steps": [int(f.num_steps) for f in fits],
+        "converged": [bool(f.result == RESULTS.successful) for f in fits],
+        "cost": [float(f.cost) for f in fits],
+        "initial_cost": [float(f.initial_cost) for f in fits],
+        "segments": [int(f.starts.shape[0]) for f in fits],
+    }
+    return last.model, info
 
 
 def _params(model) -> dict:
@@ -196,37 +240,29 @@ def run(data: TaskData, max_steps: int) -> tuple[list[ModelReport], dict]:
     )
     k = int(len(u) * (1 - HELD_OUT))
     selection = {}
-    for name, (make, free) in STRUCTURES.items():
+    for name in STRUCTURES:
         # 1. selection: calibrate on the first 80 %, free-run the last 20 %
-        part = _fit(make(), free, u[:k], y[:k], max_steps)
-        held = _held_out(part.model, u, y)
+        part, _ = _calibrate(name, u[:k], y[:k], max_steps)
+        held = _held_out(part, u, y)
         # 2. the reported model: calibrated on the whole training file
-        fit = _fit(make(), free, u, y, max_steps)
-        score = score_predictor(EMPS, fit.model, data)
+        model, info = _calibrate(name, u, y, max_steps)
+        score = score_predictor(EMPS, model, data)
         selection[name] = held
         rows.append(
             ModelReport(
                 name,
                 score,
-                parameters=fit.n_parameters,
-                train_s=fit.run_s,
-                compile_s=fit.compile_s,
-                details={
-                    "params": _params(fit.model),
-                    "held_out_rmse": held,
-                    "lm_steps": int(fit.num_steps),
-                    "converged": bool(fit.result == RESULTS.successful),
-                    "cost": float(fit.cost),
-                    "initial_cost": float(fit.initial_cost),
-                    "segments": int(fit.starts.shape[0]),
-                },
+                parameters=info["n_parameters"],
+                train_s=info["run_s"],
+                compile_s=info["compile_s"],
+                details={"params": _params(model), "held_out_rmse": held, **info},
             )
         )
         print(
             f"{name}: held-out {held:.2f} mm | train {score.mean('rmse', 'train'):.2f} mm, "
-            f"test {score.mean('rmse'):.2f} mm | {fit.n_parameters} params, "
-            f"{int(fit.num_steps)} LM steps, run {fit.run_s:.1f} s, compile "
-            f"{fit.compile_s:.1f} s",
+            f"test {score.mean('rmse'):.2f} mm | {info['n_parameters']} params, "
+            f"{info['lm_steps']} LM steps, run {info['run_s']:.1f} s, compile "
+            f"{info['compile_s']:.1f} s",
             flush=True,
         )
     best = min(selection, key=selection.get)
@@ -235,14 +271,13 @@ def run(data: TaskData, max_steps: int) -> tuple[list[ModelReport], dict]:
     # the axis between the two experiments (the test file is used for nothing else).
     test_u, test_y = EMPS.arrays(data.test[0])
     oracle = {}
-    for name in dict.fromkeys(["Coulomb + viscous + offset", best]):
-        make, free = STRUCTURES[name]
-        fit = _fit(make(), free, test_u, test_y, max_steps)
-        s = score_predictor(EMPS, fit.model, data)
+    for name in dict.fromkeys(["Coulomb + viscous + offset" + REFINE_SUFFIX, best]):
+        model, _ = _calibrate(name, test_u, test_y, max_steps)
+        s = score_predictor(EMPS, model, data)
         oracle[name] = {
             "test_rmse_mm": s.mean("rmse"),
             "train_rmse_mm": s.mean("rmse", "train"),
-            "params": _params(fit.model),
+            "params": _params(model),
         }
         print(
             f"diagnosis, {name} calibrated on the TEST file: test {s.mean('rmse'):.2f} mm, "
@@ -287,7 +322,10 @@ def main() -> None:
         )
         for r in rows
     ]
-    best_row = next(r for r in rows if r.name.startswith(best))
+    by_name = {r.name.removesuffix(" ← selected"): r for r in rows}
+    best_row = by_name[best]
+    ours = [r for r in rows[1:]]
+    lowest = min(ours, key=lambda r: r.score.mean("rmse"))
     preamble = f"""{EMPS.description}
 
 Train `DATA_EMPS.mat`, test `DATA_EMPS_PULSES.mat` (24 841 samples each, 1 kHz); the first
@@ -299,21 +337,21 @@ jaxvs models: rigid axis `M q̈ = u − F(q̇) − P(q)` (`OpenLoopAxis`: `jaxvs
 with `jaxvs.models` friction laws, optional Legendre position force), force held over each
 sample, Tsit5 with 2 steps per sample. Calibrated on the training file only by multiple
 shooting ({SEGMENT}-sample segments with free initial states and a continuity penalty;
-Levenberg–Marquardt, `fit_multiple_shooting`). Structure selection on training data only:
-calibrate on its first {100 * (1 - HELD_OUT):.0f} %, free-run its last {100 * HELD_OUT:.0f} %
-(held-out RMSE below); selected: **{best}** ({selection["held_out_rmse_mm"][best]:.2f} mm
-held out, **{best_row.score.mean("rmse"):.2f} mm** on the test file). Train time = run time
-of the whole-file calibration; compile time separate. Machine load average
+Levenberg–Marquardt, `fit_multiple_shooting`); the rows "+ free-run refinement" add
+{REFINE_STEPS} steps of free-run output error on the whole record from the 20-sample state
+estimate (one segment, state fixed: the benchmark's own protocol). Structure selection on
+training data only: calibrate on its first {100 * (1 - HELD_OUT):.0f} %, free-run its
+last {100 * HELD_OUT:.0f} % (held-out RMSE below); selected: **{best}**
+({selection["held_out_rmse_mm"][best]:.2f} mm held out,
+**{best_row.score.mean("rmse"):.2f} mm** on the test file). Train time = run time of the
+whole-file calibration; compile time separate. Machine load average
 {load0[0]:.1f} → {load1[0]:.1f} on {os.cpu_count()} CPU(s) (shared machine: timings are
 indicative)."""
     held = "\n".join(f"| {name} | {v:.2f} |" for name, v in selection["held_out_rmse_mm"].items())
     oracle = selection["oracle"]
-    cv_name = "Coulomb + viscous + offset"
     idim = selection["idim_ls_per_file"]
-    cv_row = next(r for r in rows if r.name.startswith(cv_name))
     oracle_lines = "\n".join(
-        f"| {name} | {next(r for r in rows if r.name.startswith(name)).score.mean('rmse'):.2f} | "
-        f"{o['test_rmse_mm']:.2f} |"
+        f"| {name} | {by_name[name].score.mean('rmse'):.2f} | {o['test_rmse_mm']:.2f} |"
         for name, o in oracle.items()
     )
     cvp, cvt = idim["coulomb_viscous"]["train"], idim["coulomb_viscous"]["test"]
@@ -349,13 +387,15 @@ calibrated on the test file itself reach
 |---|---:|---:|
 {oracle_lines}
 
-so the structures can follow either experiment to a few mm, but the change of the axis
-between the two experiments is larger than the 3 mm target allows, and no selection on
-training data can see it: the held-out part of the training file comes from the same
-experiment, where the direction-dependent (asymmetric) terms transfer well, while between
-experiments they transfer worst. The best structure on the test file,
-{cv_name} ({cv_row.score.mean("rmse"):.2f} mm), has the fewest terms that integrate over
-the distance travelled."""
+(so the structures can follow the test experiment this closely when calibrated on it).
+Measured on the training file only, the selected structure gives
+{best_row.score.mean("rmse"):.2f} mm on the test file; the lowest test error of the table
+is {lowest.score.mean("rmse"):.2f} mm ({lowest.name.removesuffix(" ← selected")}). The
+change of the axis between the two experiments is larger than the 3 mm target allows, and
+no selection on training data can see it: the held-out part of the training file comes
+from the same experiment, so the structures and refinements that follow the training
+experiment more closely (lower held-out error) carry its particular force balance into the
+test, where the free run integrates the difference."""
     md = write_report(
         EMPS,
         rows,

@@ -544,7 +544,7 @@ def write_report(
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    md = "\n".join(
+    md = "\n\n".join(
         part
         for part in (
             f"# {task.name}: official benchmark task",
