@@ -14,7 +14,9 @@ simulated with the measured force held over each sample (Tsit5, 2 steps per samp
 
 Calibration uses the TRAINING file only: multiple shooting (1 s segments with free initial
 states and a continuity penalty, `fit_multiple_shooting`, jaxvs's Levenberg–Marquardt
-kernel). Model structures are selected on training data only: each is calibrated on the
+kernel); the "+ free-run refinement" variants then minimise the free-run error itself on the
+whole training record (state fixed at its 20-sample estimate, as the test protocol). Model
+structures are selected on training data only: each is calibrated on the
 first 80 % of `DATA_EMPS.mat` and simulated free-run on its last 20 % (initialised from
 that part's first 20 samples); the structure with the lowest held-out RMSE is the
 "selected" one. Every structure is then recalibrated on the whole training file and run

@@ -366,7 +366,8 @@ class BenchmarkTask:
 @dataclasses.dataclass(frozen=True)
 class ExperimentScore:
     """Scores of one record: `metrics[name]` has one value per output (see
-    [`BenchmarkTask.score`][]); `predict_s` is the wall time of the prediction [s]."""
+    [`BenchmarkTask.score`][]); `predict_s` is the wall time of the prediction [s] (for a
+    jitted model the first record's includes its compilation)."""
 
     label: str
     metrics: Mapping[str, list[float]]
