@@ -3,12 +3,13 @@
 - `jaxvs.studies.thermal`: thermal virtual sensor (trainlm, sparse resampling, input
   selection, virtual-sensor metrics);
 - `jaxvs.studies.drive`: CNC axis drives (IDIM-LS, closed-loop calibration);
-- `jaxvs.studies.tmf`: TMF virtual sensor (identification routes, position families).
+- `jaxvs.studies.tmf`: TMF virtual sensor (identification routes, position families);
+- `jaxvs.studies.benchmarks`: public identification benchmarks as tasks (EMPS first).
 
 Every public name of the sub-packages is also available here.
 """
 
-from . import drive as drive, thermal as thermal, tmf as tmf
+from . import benchmarks as benchmarks, drive as drive, thermal as thermal, tmf as tmf
 from .drive import (
     ForcePrediction as ForcePrediction,
     IDIMResult as IDIMResult,
