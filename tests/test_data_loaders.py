@@ -163,7 +163,7 @@ def test_csv_semicolon_delimiter(tmp_path):
         ("t,q\n0,1\n1,2,3\n", r"line 3: 3 cells but the header has 2 columns"),
         ("t,q,q\n0,1,1\n", "appears twice"),
         ("t,q [m\n0,1\n", "is not 'name' or 'name \\[unit\\]'"),
-        ("t [ms],q\n0,1\n1,2\n", "time column is in 'ms'; jaxvs expects seconds"),
+        ("t [mm],q\n0,1\n1,2\n", "'mm' .* does not measure the same quantity as 's'"),
         ("# only a comment\n", "is empty"),
         ("t,q\n", "no data rows"),
         ("t,q\n0,1\n1,nan\n", r"Signal 'q' has a non-finite value \(nan\) at sample 1"),

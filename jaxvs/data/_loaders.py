@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ._record import DEFAULT_TIME_RTOL, Record
+from ._units import ORIGINAL_UNITS_KEY, convert, parse_header, to_si
 
 SUPPORTED_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
 
@@ -30,7 +31,6 @@ SUPPORTED_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
 _UNITS_KEY = "jaxvs_units"
 _METADATA_KEY = "jaxvs_metadata"
 _CSV_METADATA_PREFIX = "# metadata:"
-_HEADER = re.compile(r"^\s*(?P<name>[^\[\]]*?)\s*(?:\[(?P<unit>[^\[\]]*)\])?\s*$")
 
 PathLike = str | os.PathLike[str]
 
@@ -94,6 +94,25 @@ def _build(
             f"time column 't' (seconds), pass time='<column name>', or pass dt=<sampling "
             "period in s> for a file without time."
         )
+    columns = dict(columns)
+    units = dict(units)
+    metadata = dict(metadata)
+    original: dict[str, str] = dict(metadata.get(ORIGINAL_UNITS_KEY) or {})
+    time_unit = units.pop(time, None)
+    if time in columns and time_unit:
+        # The time base goes to seconds; a unit that is not a time is refused.
+        columns[time] = convert(columns[time], time_unit, "s", name=time, source=source)
+        if time_unit.strip() != "s":
+            original[time] = time_unit
+    for name, unit in list(units.items()):
+        if name not in columns or not unit:
+            continue
+        columns[name], si = to_si(columns[name], unit, name=name, source=source)
+        if si != unit:
+            original[name] = unit
+        units[name] = si
+    if original:
+        metadata[ORIGINAL_UNITS_KEY] = original
     signals = {name: values for name, values in columns.items() if name != time}
     if names is not None:
         missing = [name for name in names if name not in signals]
@@ -286,18 +305,17 @@ def load_csv(
     column_names: list[str] = []
     units: dict[str, str] = {}
     for i, cell in enumerate(header):
-        match = _HEADER.match(cell)
-        name = match.group("name") if match else ""
-        if not match or not name:
+        name, unit = parse_header(cell)
+        if not name or "[" in name or "]" in name:
             raise ValueError(
                 f"{source}, line {first + 1}: header cell {i + 1} ({cell!r}) is not "
-                "'name' or 'name [unit]'."
+                "'name' or 'name [unit]' (or 'name (unit)', 'name/unit')."
             )
         if name in column_names:
             raise ValueError(f"{source}: column name {name!r} appears twice in the header.")
         column_names.append(name)
-        if match.group("unit"):
-            units[name] = match.group("unit").strip()
+        if unit:
+            units[name] = unit
     values: list[list[float]] = []
     for row in rows:
         line = first + rows.line_num
@@ -320,12 +338,6 @@ def load_csv(
         values.append(parsed)
     if not values:
         raise ValueError(f"{source} has a header but no data rows.")
-    if time in units and units[time] != "s":
-        raise ValueError(
-            f"{source}: the time column is in {units[time]!r}; jaxvs expects seconds. Convert "
-            f"it and write the header as '{time} [s]' or '{time}'."
-        )
-    units.pop(time, None)
     table = np.asarray(values, dtype=np.float64)
     columns = {name: table[:, i] for i, name in enumerate(column_names)}
     return _build(
@@ -626,7 +638,6 @@ def load_hdf5(
     metadata = {**metadata, **found_metadata, **attributes}
     if stored is not None:
         metadata.update(_decode_json(stored, "metadata", source))
-    units.pop(time, None)
     return _build(
         columns,
         time=time,
