@@ -145,14 +145,18 @@ def test_si_records_round_trip_without_original_units(tmp_path):
 
 
 def test_require_unit_converts_compatible_and_refuses_other_quantities():
-    record = Record({"q": np.array([1.0, 2.0]), "u": np.array([3.0, 4.0])}, dt=1.0,
-                    units={"q": "mm", "u": "N"})
+    record = Record(
+        {"q": np.array([1.0, 2.0]), "u": np.array([3.0, 4.0])}, dt=1.0, units={"q": "mm", "u": "N"}
+    )
     in_m = record.require_unit("q", "m")
     np.testing.assert_allclose(in_m["q"], [1e-3, 2e-3], rtol=RTOL)
     assert in_m.unit("q") == "m" and in_m.metadata[ORIGINAL_UNITS_KEY] == {"q": "mm"}
     assert in_m.require_unit("q", "m") is in_m
-    with pytest.raises(ValueError, match=r"signal 'u': unit 'N' .*does not measure the same "
-                       r"quantity as 'm'"):
+    with pytest.raises(
+        ValueError,
+        match=r"signal 'u': unit 'N' .*does not measure the same "
+        r"quantity as 'm'",
+    ):
         record.require_unit("u", "m")
     with pytest.raises(KeyError, match="No signal named 'x'"):
         record.require_unit("x", "m")

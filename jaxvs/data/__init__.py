@@ -31,18 +31,18 @@ from ._splits import (
     split_blocks as split_blocks,
     split_experiments as split_experiments,
 )
-from ._units import (
-    ORIGINAL_UNITS_KEY as ORIGINAL_UNITS_KEY,
-    convert as convert_units,
-    parse_header as parse_header,
-    parse_unit as parse_unit,
-    si_unit as si_unit,
-    to_si as to_si,
-)
 from ._uff import (
     load_uff_frf as load_uff_frf,
     load_uff_modes as load_uff_modes,
     load_uff_record as load_uff_record,
     save_uff as save_uff,
     uff_datasets as uff_datasets,
+)
+from ._units import (
+    ORIGINAL_UNITS_KEY as ORIGINAL_UNITS_KEY,
+    convert_units as convert_units,
+    parse_header as parse_header,
+    parse_unit as parse_unit,
+    si_unit as si_unit,
+    to_si as to_si,
 )

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ._record import DEFAULT_TIME_RTOL, Record
-from ._units import ORIGINAL_UNITS_KEY, convert, parse_header, to_si
+from ._units import ORIGINAL_UNITS_KEY, convert_units, parse_header, to_si
 
 SUPPORTED_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
 
@@ -101,7 +101,7 @@ def _build(
     time_unit = units.pop(time, None)
     if time in columns and time_unit:
         # The time base goes to seconds; a unit that is not a time is refused.
-        columns[time] = convert(columns[time], time_unit, "s", name=time, source=source)
+        columns[time] = convert_units(columns[time], time_unit, "s", name=time, source=source)
         if time_unit.strip() != "s":
             original[time] = time_unit
     for name, unit in list(units.items()):

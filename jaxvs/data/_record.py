@@ -580,7 +580,7 @@ class Record:
         `KeyError` for a missing signal; `ValueError` naming the signal and both units when
         they measure different quantities or a unit is unknown.
         """
-        from ._units import ORIGINAL_UNITS_KEY, convert, parse_unit
+        from ._units import ORIGINAL_UNITS_KEY, convert_units, parse_unit
 
         self._require([name])
         if not isinstance(unit, str):
@@ -593,7 +593,7 @@ class Record:
             return Record._trusted(dict(self._signals), self._t0, self._dt, units, self._metadata)
         if current == unit:
             return self
-        values = convert(self._signals[name], current, unit, name=name, source="Record")
+        values = convert_units(self._signals[name], current, unit, name=name, source="Record")
         record = self.with_signal(name, values, unit=unit)
         original = dict(self._metadata.get(ORIGINAL_UNITS_KEY) or {})
         original.setdefault(name, current)

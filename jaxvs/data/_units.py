@@ -32,7 +32,7 @@ __all__ = [
     "parse_unit",
     "si_unit",
     "to_si",
-    "convert",
+    "convert_units",
 ]
 
 ORIGINAL_UNITS_KEY = "original_units"
@@ -200,7 +200,9 @@ def _target(unit: Any, text: str) -> str:
     return f"{quantity.units:~C}"
 
 
-def convert(values: Any, from_unit: str, to_unit: str, *, name: str = "", source: str = "") -> np.ndarray:
+def convert_units(
+    values: Any, from_unit: str, to_unit: str, *, name: str = "", source: str = ""
+) -> np.ndarray:
     """`values` in `from_unit` converted to `to_unit` (pint; offsets such as °F→°C honoured).
 
     **Raises:**
@@ -261,8 +263,8 @@ def to_si(values: Any, unit: str, *, name: str = "", source: str = "") -> tuple[
         # Already the SI unit (perhaps spelled differently, '°C' for 'degC'): kept as written.
         return array.copy(), unit.strip()
     if target == "rpm":
-        return convert(array, unit, "rpm", name=name, source=source), "rpm"
-    return convert(array, unit, target, name=name, source=source), target
+        return convert_units(array, unit, "rpm", name=name, source=source), "rpm"
+    return convert_units(array, unit, target, name=name, source=source), target
 
 
 _BRACKETS = re.compile(r"^\s*(?P<name>.*?)\s*\[(?P<unit>[^\[\]]*)\]\s*$")
