@@ -176,3 +176,12 @@ def test_to_si_and_si_unit():
     np.testing.assert_allclose(values, [1e3, 2e3], rtol=RTOL)
     assert unit == "N/m"
     assert si_unit("kN*m") == "N*m" and si_unit("mm/min") == "m/s" and si_unit("-") == ""
+
+
+def test_ambiguous_g_is_refused_and_g0_is_gravity(tmp_path):
+    path = write_csv(tmp_path, ["t", "acc [g]"], [[0, 1.0], [1, 2.0]])
+    with pytest.raises(ValueError, match="'g' is ambiguous.*'g0'"):
+        load_csv(path)
+    path = write_csv(tmp_path, ["t", "acc [g0]"], [[0, 1.0], [1, 2.0]], name="g0.csv")
+    # Standard gravity is 9.80665 m/s^2 by definition (CGPM 1901).
+    np.testing.assert_allclose(load_csv(path)["acc"], [9.80665, 19.6133], rtol=1e-15)

@@ -113,6 +113,13 @@ def parse_unit(text: str, *, name: str = "", source: str = "") -> Any:
     `ValueError` naming the signal, the source and the fix when the unit is unknown.
     """
     where = _where(name, source)
+    if text.strip() == "g":
+        # pint reads "g" as gram, accelerometer channels mean standard gravity: guessing
+        # either could be silently wrong by a factor of ~10^4.
+        raise ValueError(
+            f"{where}unit 'g' is ambiguous (gram or standard gravity). Write 'g0' for "
+            "standard gravity (9.80665 m/s^2) or 'gram' for mass."
+        )
     normalised = _normalise(text)
     if normalised is None or normalised == "":
         if normalised is None:
