@@ -43,7 +43,12 @@ from .calibration import (
     sweep as sweep,
     tmf_from_modal as tmf_from_modal,
 )
-from .diagnosis import DiagnosisReport as DiagnosisReport, diagnose as diagnose
+from .diagnosis import (
+    CheckReport as CheckReport,
+    DiagnosisReport as DiagnosisReport,
+    check as check,
+    diagnose as diagnose,
+)
 from .models import (
     AbstractLinearModel as AbstractLinearModel,
     FirstOrder as FirstOrder,

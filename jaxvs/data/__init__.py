@@ -13,10 +13,12 @@ from ._excitation import (
 )
 from ._frf import FRF_KINDS as FRF_KINDS, FRFData as FRFData
 from ._loaders import (
+    FRF_SUFFIXES as FRF_SUFFIXES,
     SUPPORTED_SUFFIXES as SUPPORTED_SUFFIXES,
     load as load,
     load_csv as load_csv,
     load_emps as load_emps,
+    load_frf as load_frf,
     load_hdf5 as load_hdf5,
     load_mat as load_mat,
     load_npz as load_npz,
@@ -26,10 +28,22 @@ from ._loaders import (
     save_npz as save_npz,
 )
 from ._record import DEFAULT_TIME_RTOL as DEFAULT_TIME_RTOL, Record as Record
+from ._sinumerik import (
+    SINUMERIK_ALPHABET as SINUMERIK_ALPHABET,
+    decode_sinumerik_base85 as decode_sinumerik_base85,
+    load_sinumerik as load_sinumerik,
+    load_sinumerik_frf as load_sinumerik_frf,
+)
 from ._splits import (
     Split as Split,
     split_blocks as split_blocks,
     split_experiments as split_experiments,
+)
+from ._testbench import (
+    is_twincat_scope as is_twincat_scope,
+    load_mdf as load_mdf,
+    load_tdms as load_tdms,
+    load_twincat_scope as load_twincat_scope,
 )
 from ._uff import (
     load_uff_frf as load_uff_frf,
@@ -37,4 +51,13 @@ from ._uff import (
     load_uff_record as load_uff_record,
     save_uff as save_uff,
     uff_datasets as uff_datasets,
+)
+from ._units import (
+    ORIGINAL_UNITS_KEY as ORIGINAL_UNITS_KEY,
+    convert_units as convert_units,
+    parse_header as parse_header,
+    parse_unit as parse_unit,
+    si_record as si_record,
+    si_unit as si_unit,
+    to_si as to_si,
 )

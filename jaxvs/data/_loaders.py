@@ -23,14 +23,37 @@ from typing import Any
 import numpy as np
 
 from ._record import DEFAULT_TIME_RTOL, Record
+from ._units import ORIGINAL_UNITS_KEY, convert_units, parse_header, to_si
 
-SUPPORTED_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
+SUPPORTED_SUFFIXES = (
+    ".csv",
+    ".npz",
+    ".mat",
+    ".h5",
+    ".hdf5",
+    ".xml",
+    ".tdms",
+    ".mf4",
+    ".mdf",
+    ".unv",
+    ".uff",
+)
+FRF_SUFFIXES = (".unv", ".uff", ".xml")
+
+# Leading bytes of the binary formats, for files whose suffix says nothing.
+_MAGIC = (
+    (b"\x89HDF\r\n\x1a\n", ".h5"),
+    (b"PK\x03\x04", ".npz"),
+    (b"MATLAB", ".mat"),
+    (b"TDSm", ".tdms"),
+    (b"MDF     ", ".mf4"),
+    (b"UnFinMF ", ".mf4"),
+)
 
 # Names under which the writers store units and metadata as JSON text.
 _UNITS_KEY = "jaxvs_units"
 _METADATA_KEY = "jaxvs_metadata"
 _CSV_METADATA_PREFIX = "# metadata:"
-_HEADER = re.compile(r"^\s*(?P<name>[^\[\]]*?)\s*(?:\[(?P<unit>[^\[\]]*)\])?\s*$")
 
 PathLike = str | os.PathLike[str]
 
@@ -94,6 +117,25 @@ def _build(
             f"time column 't' (seconds), pass time='<column name>', or pass dt=<sampling "
             "period in s> for a file without time."
         )
+    columns = dict(columns)
+    units = dict(units)
+    metadata = dict(metadata)
+    original: dict[str, str] = dict(metadata.get(ORIGINAL_UNITS_KEY) or {})
+    time_unit = units.pop(time, None)
+    if time in columns and time_unit:
+        # The time base goes to seconds; a unit that is not a time is refused.
+        columns[time] = convert_units(columns[time], time_unit, "s", name=time, source=source)
+        if time_unit.strip() != "s":
+            original[time] = time_unit
+    for name, unit in list(units.items()):
+        if name not in columns or not unit:
+            continue
+        columns[name], si = to_si(columns[name], unit, name=name, source=source)
+        if si != unit:
+            original[name] = unit
+        units[name] = si
+    if original:
+        metadata[ORIGINAL_UNITS_KEY] = original
     signals = {name: values for name, values in columns.items() if name != time}
     if names is not None:
         missing = [name for name in names if name not in signals]
@@ -184,6 +226,27 @@ def _is_emps(variables: Iterable[str]) -> bool:
     return {"qm", "qg", "vir"} <= set(variables)
 
 
+def _sniff(file: Path) -> str:
+    """The format of `file`: its suffix when known, else what its first bytes say."""
+    suffix = file.suffix.lower()
+    if suffix in SUPPORTED_SUFFIXES:
+        return suffix
+    with open(file, "rb") as handle:
+        head = handle.read(64)
+    for magic, kind in _MAGIC:
+        if head.startswith(magic):
+            return kind
+    text = head.lstrip(b"\xef\xbb\xbf").lstrip()
+    if text.startswith(b"<?xml") or text.startswith(b"<"):
+        return ".xml"
+    if text.startswith(b"-1") and b"\n" in text:
+        return ".unv"
+    raise ValueError(
+        f"Unsupported file type {file.suffix!r} for {str(file)!r}; supported suffixes: "
+        f"{', '.join(SUPPORTED_SUFFIXES)} (binary formats are also recognised by content)."
+    )
+
+
 def load(
     path: PathLike,
     *,
@@ -191,47 +254,139 @@ def load(
     time: str = "t",
     dt: float | None = None,
     time_rtol: float = DEFAULT_TIME_RTOL,
-) -> Record:
-    """Load one experiment from a CSV, NPZ, MAT or HDF5 file, chosen by the file suffix.
+) -> Record | list[Record]:
+    """Load the time series of a measurement file, recognised by suffix and content.
 
-    A MAT file with the EMPS variables `qm`, `qg` and `vir` is read by `load_emps`, which
-    maps them to the canonical names `q`, `r`, `u`.
+    | format | suffix | reader | returns |
+    |---|---|---|---|
+    | CSV with a header row (units as `name [unit]`) | `.csv` | `load_csv` | `Record` |
+    | TwinCAT Scope text export | `.csv` (recognised by content) | `load_twincat_scope` | list |
+    | NumPy archive | `.npz` | `load_npz` | `Record` |
+    | MATLAB v5/v7 (EMPS files → `load_emps`) | `.mat` | `load_mat` | `Record` |
+    | HDF5 (MATLAB v7.3 too) | `.h5`, `.hdf5` | `load_hdf5` | `Record` |
+    | Sinumerik frequency measurement / trace XML | `.xml` | `load_sinumerik` | list |
+    | NI TDMS | `.tdms` | `load_tdms` | list |
+    | ASAM MDF 3/4 | `.mf4`, `.mdf` | `load_mdf` | list |
+    | UFF dataset 58 time responses | `.unv`, `.uff` | `load_uff_record` | `Record` |
+
+    A reader that finds several time bases (channels sampled at different rates, the two
+    runs of a Sinumerik measurement) returns a list of `Record`s, never resampling; a list
+    with one record is returned as that record. Files without a known suffix are
+    recognised by their first bytes (HDF5, NPZ, MAT, TDMS, MDF, XML). Units go to SI
+    (`jaxvs.data.to_si`), the originals stay in `metadata["original_units"]`.
 
     **Arguments:**
 
-    - `path`: the file (`.csv`, `.npz`, `.mat`, `.h5` or `.hdf5`); it is only read.
+    - `path`: the file; it is only read.
     - `names`: the signals to keep (default: all).
-    - `time`: name of the time column [s] (ignored for EMPS files, whose time is `t`).
-    - `dt`: sampling period [s] for files without a time column (then `t0 = 0`).
+    - `time`: name of the time column [s] (CSV, NPZ, MAT, HDF5; ignored for EMPS files).
+    - `dt`: sampling period [s] for CSV/NPZ/MAT/HDF5 files without a time column.
     - `time_rtol`: tolerance of the uniform-time check, relative to the sampling period.
 
     **Returns:**
 
-    A `Record`.
+    A `Record`, or a list of `Record`s for files with several time bases.
 
     **Raises:**
 
-    `FileNotFoundError`; `ValueError` for an unsupported suffix, a missing time column, a
-    non-numeric cell or a non-uniform time vector; `KeyError` for a requested signal that
-    the file does not hold.
+    `FileNotFoundError`; `ValueError` for an unsupported file, a missing time column, a
+    non-numeric cell, a non-uniform time vector, an unknown unit, or a truncated file
+    (each naming the file and the fix); `KeyError` for a requested signal that the file
+    does not hold.
     """
     file = _existing_file(path)
-    suffix = file.suffix.lower()
+    kind = _sniff(file)
     options = dict(names=names, time=time, dt=dt, time_rtol=time_rtol)
-    if suffix == ".csv":
+    if kind == ".csv":
+        from ._testbench import is_twincat_scope, load_twincat_scope
+
+        if is_twincat_scope(file):
+            return _one_or_list(load_twincat_scope(file, names=names, time_rtol=time_rtol))
         return load_csv(file, **options)  # type: ignore[arg-type]
-    if suffix == ".npz":
+    if kind == ".npz":
         return load_npz(file, **options)  # type: ignore[arg-type]
-    if suffix == ".mat":
+    if kind == ".mat":
         if _is_emps(_read_mat(file, names_only=True)):
             record = load_emps(file, time_rtol=time_rtol)
             return record if names is None else record.select(_names_list(names) or [])
         return load_mat(file, **options)  # type: ignore[arg-type]
-    if suffix in (".h5", ".hdf5"):
+    if kind in (".h5", ".hdf5"):
         return load_hdf5(file, **options)  # type: ignore[arg-type]
+    if kind == ".xml":
+        from ._sinumerik import load_sinumerik
+
+        records = load_sinumerik(file, time_rtol=time_rtol)
+        return _one_or_list(_keep(records, names, str(file)))
+    if kind == ".tdms":
+        from ._testbench import load_tdms
+
+        return _one_or_list(load_tdms(file, names=names, time_rtol=time_rtol))
+    if kind in (".mf4", ".mdf"):
+        from ._testbench import load_mdf
+
+        return _one_or_list(load_mdf(file, names=names, time_rtol=time_rtol))
+    from ._uff import load_uff_record
+
+    record = load_uff_record(file)
+    return record if names is None else record.select(_names_list(names) or [])
+
+
+def _keep(records: list[Record], names: Iterable[str] | str | None, source: str) -> list[Record]:
+    if names is None:
+        return records
+    wanted = _names_list(names) or []
+    kept = [
+        record.select([n for n in wanted if n in record])
+        for record in records
+        if any(n in record for n in wanted)
+    ]
+    if not kept:
+        available = sorted({n for r in records for n in r.names})
+        raise KeyError(f"{source} has no signal {wanted}; available signals: {available}.")
+    return kept
+
+
+def _one_or_list(records: list[Record]) -> Record | list[Record]:
+    return records[0] if len(records) == 1 else records
+
+
+def load_frf(path: PathLike, **options: Any) -> Any:
+    """Load the frequency response stored in a file, recognised by suffix and content.
+
+    | format | suffix | reader |
+    |---|---|---|
+    | UFF dataset 58 FRFs / transmissibilities (+ coherence) | `.unv`, `.uff` | `load_uff_frf` |
+    | Sinumerik frequency measurement (H1 from the stored spectra) | `.xml` | `load_sinumerik_frf` |
+    | Sinumerik auto-tuning (AST): plant + controller settings | `.xml` | `load_sinumerik_frf` |
+
+    **Arguments:**
+
+    - `path`: the file (only read).
+    - `options`: passed to the reader (`index=`, `layout=` for UFF; `index=` for AST).
+
+    **Returns:**
+
+    An `FRFData` (frequencies in Hz).
+
+    **Raises:**
+
+    `FileNotFoundError`; `ValueError` naming the file and the fix for a time-domain file
+    (estimate the FRF with `jaxvs.signal.frf_h1`), an unsupported suffix or a damaged file.
+    """
+    file = _existing_file(path)
+    kind = _sniff(file)
+    if kind in (".unv", ".uff"):
+        from ._uff import load_uff_frf
+
+        return load_uff_frf(file, **options)
+    if kind == ".xml":
+        from ._sinumerik import load_sinumerik_frf
+
+        return load_sinumerik_frf(file, **options)
     raise ValueError(
-        f"Unsupported file type {file.suffix!r} for {str(file)!r}; supported suffixes: "
-        f"{', '.join(SUPPORTED_SUFFIXES)}."
+        f"{str(file)!r} ({kind}) holds time series, not a frequency response; load it with "
+        "jaxvs.data.load and estimate the FRF with jaxvs.signal.frf_h1. load_frf reads "
+        f"{', '.join(FRF_SUFFIXES)} (UFF 58, Sinumerik frequency measurement and AST XML)."
     )
 
 
@@ -286,18 +441,17 @@ def load_csv(
     column_names: list[str] = []
     units: dict[str, str] = {}
     for i, cell in enumerate(header):
-        match = _HEADER.match(cell)
-        name = match.group("name") if match else ""
-        if not match or not name:
+        name, unit = parse_header(cell)
+        if not name or "[" in name or "]" in name:
             raise ValueError(
                 f"{source}, line {first + 1}: header cell {i + 1} ({cell!r}) is not "
-                "'name' or 'name [unit]'."
+                "'name' or 'name [unit]' (or 'name (unit)', 'name/unit')."
             )
         if name in column_names:
             raise ValueError(f"{source}: column name {name!r} appears twice in the header.")
         column_names.append(name)
-        if match.group("unit"):
-            units[name] = match.group("unit").strip()
+        if unit:
+            units[name] = unit
     values: list[list[float]] = []
     for row in rows:
         line = first + rows.line_num
@@ -320,12 +474,6 @@ def load_csv(
         values.append(parsed)
     if not values:
         raise ValueError(f"{source} has a header but no data rows.")
-    if time in units and units[time] != "s":
-        raise ValueError(
-            f"{source}: the time column is in {units[time]!r}; jaxvs expects seconds. Convert "
-            f"it and write the header as '{time} [s]' or '{time}'."
-        )
-    units.pop(time, None)
     table = np.asarray(values, dtype=np.float64)
     columns = {name: table[:, i] for i, name in enumerate(column_names)}
     return _build(
@@ -626,7 +774,6 @@ def load_hdf5(
     metadata = {**metadata, **found_metadata, **attributes}
     if stored is not None:
         metadata.update(_decode_json(stored, "metadata", source))
-    units.pop(time, None)
     return _build(
         columns,
         time=time,

@@ -556,6 +556,49 @@ class Record:
             units[name] = unit
         return Record._trusted(data, self._t0, self._dt, units, self._metadata)
 
+    def require_unit(self, name: str, unit: str) -> Record:
+        """This record with signal `name` expressed in `unit`, or a clear refusal.
+
+        Model families call this for the signals whose physical quantity they assume
+        (`q` in m, `u` in N, `T_chassis` in °C …). A signal in another unit of the same
+        quantity is converted (`mm` → `m`); one in a different quantity (`N` where `m` is
+        expected) is refused. A signal without a unit is taken to be in `unit` already (the
+        canonical names of DESIGN.md §3.2 imply their units) and is labelled with it.
+
+        **Arguments:**
+
+        - `name`: the signal.
+        - `unit`: the unit the caller computes in, e.g. `"m"`.
+
+        **Returns:**
+
+        A `Record` (this one when nothing changes); a converted signal's former unit is
+        added to `metadata["original_units"]`.
+
+        **Raises:**
+
+        `KeyError` for a missing signal; `ValueError` naming the signal and both units when
+        they measure different quantities or a unit is unknown.
+        """
+        from ._units import ORIGINAL_UNITS_KEY, convert_units, parse_unit
+
+        self._require([name])
+        if not isinstance(unit, str):
+            raise TypeError(f"unit must be a string such as 'm', got {unit!r}.")
+        current = self._units.get(name)
+        if current is None:
+            parse_unit(unit, name=name)
+            units = dict(self._units)
+            units[name] = unit
+            return Record._trusted(dict(self._signals), self._t0, self._dt, units, self._metadata)
+        if current == unit:
+            return self
+        values = convert_units(self._signals[name], current, unit, name=name, source="Record")
+        record = self.with_signal(name, values, unit=unit)
+        original = dict(self._metadata.get(ORIGINAL_UNITS_KEY) or {})
+        original.setdefault(name, current)
+        return record.with_metadata({ORIGINAL_UNITS_KEY: original})
+
     def with_metadata(self, metadata: Mapping[str, Any]) -> Record:
         """A record whose metadata is this record's updated with `metadata`."""
         merged = dict(self._metadata)

@@ -9,6 +9,7 @@ from ._base import (
     Experiment as Experiment,
     GapModel as GapModel,
 )
+from ._check import CheckReport as CheckReport, check as check
 from ._diagnose import FAMILIES as FAMILIES, diagnose as diagnose
 from ._gapmap import GapCell as GapCell, gap_map as gap_map
 from ._report import DiagnosisReport as DiagnosisReport

@@ -39,8 +39,13 @@ def _records(data: Any, role: str) -> list[tuple[Record, str]]:
             name = str(item.metadata.get("name") or item.metadata.get("file") or f"{role} {i + 1}")
             out.append((item, pathlib.Path(name).name))
         elif isinstance(item, str | pathlib.Path):
-            rec = load(item)
-            out.append((rec, pathlib.Path(item).name))
+            loaded = load(item)
+            # A file with several time bases or runs (Sinumerik, TwinCAT, TDMS, MDF) gives
+            # one experiment per record.
+            recs = loaded if isinstance(loaded, list) else [loaded]
+            base = pathlib.Path(item).name
+            for k, rec in enumerate(recs):
+                out.append((rec, base if len(recs) == 1 else f"{base}[{k}]"))
         else:
             raise TypeError(
                 f"diagnose: {role} experiment {i + 1} is a {type(item).__name__}; give a "

@@ -1,0 +1,369 @@
+"""`jaxvs.check`: can these records support the family's nominal model?
+
+Before any calibration, look at the data the way a control engineer would (Isaac Sim's
+identification workflow does the same before it solves): the time base, clipping and
+quantisation, the band the excitation covers against the band of the model, the coherence
+between input and output, for drives motion in both directions, and finally the
+singular values of the nominal model's Jacobian on these records — the parameter
+combinations the records cannot identify.
+
+Blocking findings (exit code 3 of `jaxvs check`): a family's preprocessing refuses the
+records (too short, no motion, constant input), drives that move in one direction only,
+or a Jacobian whose smallest column-scaled singular value is below `1e-6` of the largest
+(heuristic: at that conditioning float64 least squares loses ten digits, so the
+combination's estimate is noise). Everything else is reported as a warning.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import pathlib
+from collections.abc import Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..data import Record
+from ._base import GapModel, unwrap
+from ._diagnose import FAMILIES, _check_signals, _records
+
+__all__ = ["CheckReport", "check"]
+
+# heuristics, each documented where it is used
+_SINGULAR_RTOL = 1e-6
+_CLIP_SHARE = 0.01
+_CLIP_RUN = 3
+_QUANT_SHARE = 0.05
+_COHERENCE_MIN = 0.5
+
+
+class CheckReport:
+    """What `jaxvs.check` found: `content` (the JSON-ready dict), `ok`, `to_markdown`,
+    `save(folder)` (writes `report.json` and `report.md`)."""
+
+    def __init__(self, content: dict[str, Any]):
+        self.content = content
+
+    @property
+    def ok(self) -> bool:
+        """Whether the records can support the family's nominal model (exit code 0)."""
+        return bool(self.content["identifiable"])
+
+    @property
+    def exit_code(self) -> int:
+        return 0 if self.ok else 3
+
+    def to_markdown(self) -> str:
+        c = self.content
+        verdict = "can" if self.ok else "**cannot**"
+        lines = [
+            f"# jaxvs check — {c['family']}",
+            "",
+            f"The records {verdict} support the nominal model ({c['nominal']}).",
+            "",
+        ]
+        if c["blocking"]:
+            lines += ["## Blocking", ""] + [f"- {b}" for b in c["blocking"]] + [""]
+        if c["warnings"]:
+            lines += ["## Warnings", ""] + [f"- {w}" for w in c["warnings"]] + [""]
+        lines += [
+            "## Records",
+            "",
+            "| record | samples | fs [Hz] | duration [s] | excitation band [Hz] |",
+            "|---|---|---|---|---|",
+        ]
+        for r in c["records"]:
+            band = r.get("excitation_band_hz")
+            band_text = "—" if band is None else f"{band[0]:.3g}–{band[1]:.3g}"
+            lines.append(
+                f"| {r['name']} | {r['samples']} | {r['fs']:.6g} | {r['duration']:.4g} | "
+                f"{band_text} |"
+            )
+        lines += [
+            "",
+            "| record | signal | clipped share | quantisation step / std |",
+            "|---|---|---|---|",
+        ]
+        for r in c["records"]:
+            for sig, q in r["signals"].items():
+                lines.append(
+                    f"| {r['name']} | {sig} | {100 * q['clipped_share']:.2f} % | "
+                    f"{q['quantisation_step_over_std']:.3g} |"
+                )
+        ident = c.get("jacobian")
+        if ident:
+            lines += [
+                "",
+                "## Identifiability of the nominal model",
+                "",
+                "Singular values of the column-scaled Jacobian (largest first): "
+                + ", ".join(f"{s:.3g}" for s in ident["singular_values"]),
+                "",
+                f"Condition number: {ident['condition']:.3g}.",
+            ]
+            for combo in ident["unidentifiable"]:
+                terms = " + ".join(f"{w:+.3f}·{n}" for n, w in combo["combination"].items())
+                lines.append(f"- not identifiable: {terms} (σ/σ_max = {combo['relative']:.2g})")
+        return "\n".join(lines) + "\n"
+
+    def save(self, folder: str | pathlib.Path) -> pathlib.Path:
+        out = pathlib.Path(folder)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "report.json").write_text(json.dumps(self.content, indent=2, default=_json))
+        (out / "report.md").write_text(self.to_markdown())
+        return out
+
+    def __repr__(self) -> str:
+        return f"CheckReport(family={self.content['family']!r}, ok={self.ok})"
+
+
+def _json(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
+
+
+# --- data quality ------------------------------------------------------------------------
+
+
+def _clipped_share(x: np.ndarray) -> float:
+    """Share of samples in runs of >= 3 equal samples at the signal's minimum or maximum.
+
+    Heuristic: a saturated sensor or amplifier sits at its limit for consecutive samples,
+    a signal that merely touches its extreme does not.
+    """
+    span = float(np.ptp(x))
+    if span == 0:
+        return 1.0
+    tol = 1e-9 * span
+    share = 0
+    for level in (x.min(), x.max()):
+        at = np.abs(x - level) <= tol
+        # lengths of the runs of consecutive True
+        edges = np.diff(np.concatenate([[0], at.astype(int), [0]]))
+        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        runs = stops - starts
+        share += int(runs[runs >= _CLIP_RUN].sum())
+    return share / x.size
+
+
+def _quantisation_step(x: np.ndarray) -> float:
+    """The smallest positive difference between distinct sample values (the resolution
+    when the signal was quantised, else a tiny number)."""
+    levels = np.unique(x)
+    if levels.size < 2:
+        return 0.0
+    return float(np.min(np.diff(levels)))
+
+
+def _excitation_band(x: np.ndarray, fs: float) -> tuple[float, float] | None:
+    """Frequencies holding 5 % and 95 % of the AC power of `x` (Welch PSD)."""
+    import scipy.signal as ss
+
+    x = np.asarray(x, float) - np.mean(x)
+    if not np.any(x):
+        return None
+    f, p = ss.welch(x, fs=fs, nperseg=min(x.size, 1024))
+    cum = np.cumsum(p[1:])
+    if cum[-1] <= 0:
+        return None
+    cum /= cum[-1]
+    return float(f[1:][np.searchsorted(cum, 0.05)]), float(f[1:][np.searchsorted(cum, 0.95)])
+
+
+_INPUTS = {"drive": "u", "tmf": "x_e", "thermal": "T_chassis"}
+_OUTPUTS = {"drive": "q", "tmf": "x_t", "thermal": "T_bearing"}
+
+
+def _record_quality(record: Record, name: str, family: str) -> tuple[dict, list[str], list[str]]:
+    blocking, warnings = [], []
+    fam = FAMILIES[family]
+    summary: dict[str, Any] = {
+        "name": name,
+        "samples": len(record),
+        "fs": record.fs,
+        "duration": record.duration,
+        "signals": {},
+    }
+    for sig in fam.required + tuple(s for s in fam.optional if s in record):
+        x = np.asarray(record[sig], float)
+        std = float(np.std(x))
+        clipped = _clipped_share(x)
+        step = _quantisation_step(x)
+        ratio = step / std if std > 0 else math.inf
+        summary["signals"][sig] = {
+            "clipped_share": clipped,
+            "quantisation_step": step,
+            "quantisation_step_over_std": ratio,
+        }
+        if std == 0:
+            (blocking if sig in fam.required else warnings).append(
+                f"{name}: signal {sig!r} is constant; it carries no information."
+            )
+            continue
+        if clipped > _CLIP_SHARE:
+            warnings.append(
+                f"{name}: {100 * clipped:.1f} % of {sig!r} sits at its minimum or maximum for "
+                "3+ samples (clipping or saturation); exclude those stretches or reduce the "
+                "excitation."
+            )
+        if ratio > _QUANT_SHARE:
+            warnings.append(
+                f"{name}: {sig!r} is quantised coarsely (step {step:.3g} = {ratio:.2f} of its "
+                "standard deviation); raise the excitation or the sensor resolution."
+            )
+    u = _INPUTS[family]
+    if u in record and np.ptp(record[u]) > 0:
+        summary["excitation_band_hz"] = _excitation_band(record[u], record.fs)
+    y = _OUTPUTS[family]
+    if family in ("tmf", "drive") and u in record and y in record:
+        from ..signal import coherence
+
+        n = len(record)
+        if n >= 64 and np.ptp(record[u]) > 0 and np.ptp(record[y]) > 0:
+            f, c = coherence(
+                np.asarray(record[u]), np.asarray(record[y]), record.fs, nperseg=min(n // 4, 1024)
+            )
+            f, c = np.asarray(f), np.asarray(c).reshape(-1)
+            band = summary.get("excitation_band_hz")
+            sel = (f > 0) if band is None else (f >= band[0]) & (f <= band[1])
+            med = float(np.median(c[sel])) if sel.any() else float("nan")
+            summary["median_coherence_in_band"] = med
+            if family == "tmf" and med < _COHERENCE_MIN:
+                warnings.append(
+                    f"{name}: median coherence {med:.2f} between {u!r} and {y!r} in the "
+                    "excitation band; the TMF estimate will be noisy — average more data."
+                )
+    if family == "drive" and "q" in record:
+        v = np.gradient(np.asarray(record["q"], float), record.dt)
+        vmax = float(np.max(np.abs(v)))
+        moving = np.abs(v) > 0.05 * vmax if vmax > 0 else np.zeros(v.size, bool)
+        pos = float(np.mean(v[moving] > 0)) if moving.any() else 0.0
+        signs = np.sign(v[moving])
+        reversals = int(np.sum(signs[1:] != signs[:-1])) if signs.size > 1 else 0
+        summary["share_moving_positive"] = pos
+        summary["reversals"] = reversals
+        if vmax == 0:
+            blocking.append(f"{name}: the axis does not move (q is constant).")
+        elif pos < 0.05 or pos > 0.95:
+            blocking.append(
+                f"{name}: the axis moves in one direction only ({100 * pos:.0f} % of the moving "
+                "samples forward); viscous friction and the force offset cannot be told apart. "
+                "Record motion in both directions."
+            )
+    return summary, blocking, warnings
+
+
+# --- identifiability ---------------------------------------------------------------------
+
+
+def _parameter_names(nominal: eqx.Module) -> list[str]:
+    params = eqx.filter(nominal, eqx.is_inexact_array)
+    names = []
+    for path, leaf in jax.tree_util.tree_flatten_with_path(params)[0]:
+        base = jax.tree_util.keystr(path).lstrip(".")
+        size = int(np.size(leaf))
+        names += [base] if size == 1 else [f"{base}[{i}]" for i in range(size)]
+    return names
+
+
+def _jacobian_report(nominal: eqx.Module, experiments: Sequence[Any]) -> dict[str, Any]:
+    params, static = eqx.partition(nominal, eqx.is_inexact_array)
+    flat, unravel = jax.flatten_util.ravel_pytree(params)
+
+    def predict(theta):
+        model = GapModel(eqx.combine(unravel(theta), static))
+        return jnp.concatenate([model(e.jax_arrays()) for e in experiments])
+
+    J = np.asarray(jax.jacfwd(predict)(flat))
+    scale = np.linalg.norm(J, axis=0)
+    scale[scale == 0] = 1.0
+    _, s, vt = np.linalg.svd(J / scale, full_matrices=False)
+    names = _parameter_names(nominal)
+    smax = float(s[0]) if s.size else 0.0
+    out = {
+        "parameters": names,
+        "singular_values": [float(v) for v in s],
+        "condition": float(s[0] / s[-1]) if s.size and s[-1] > 0 else math.inf,
+        "unidentifiable": [],
+    }
+    for k, sv in enumerate(s):
+        rel = sv / smax if smax > 0 else 0.0
+        if rel < _SINGULAR_RTOL:
+            direction = vt[k] / np.max(np.abs(vt[k]))
+            combo = {n: float(w) for n, w in zip(names, direction) if abs(w) > 0.05}
+            out["unidentifiable"].append({"relative": float(rel), "combination": combo})
+    return out
+
+
+def check(data: Any, *, family: str, **options: Any) -> CheckReport:
+    """Data-quality and identifiability check of records for a family's nominal model.
+
+    **Arguments:**
+
+    - `data`: a `Record`, a path, or a list of them (several experiments).
+    - `family`: `"drive"`, `"tmf"` or `"thermal"`.
+    - `options`: family options as for `jaxvs.diagnose` (e.g. `cutoff_hz`, `order`).
+
+    **Returns:**
+
+    A `CheckReport`: `ok` is `True` when the records can support the family's nominal
+    model; `content` holds per-record findings (sample rate, duration, clipping share and
+    quantisation step per signal, excitation band, coherence, drive motion directions and
+    reversals), the blocking findings and warnings, and the nominal model's Jacobian
+    singular values with the parameter combinations the records cannot identify.
+
+    **Raises:**
+
+    `ValueError` for an unknown family, missing signals or unreadable files (user errors,
+    exit code 2 of `jaxvs check`).
+    """
+    if family not in FAMILIES:
+        raise ValueError(f"check: unknown family {family!r}; choose one of {sorted(FAMILIES)}.")
+    recs = _records(data, "calibration")
+    fam = FAMILIES[family](**options)
+    _check_signals(fam, recs)
+    blocking: list[str] = []
+    warnings: list[str] = []
+    summaries = []
+    for record, name in recs:
+        summary, b, w = _record_quality(record, name, family)
+        summaries.append(summary)
+        blocking += b
+        warnings += w
+    rates = {round(r.fs, 9) for r, _ in recs}
+    if len(rates) > 1:
+        warnings.append(
+            f"the records have different sample rates {sorted(rates)} Hz; they are "
+            "calibrated jointly but never resampled — check that this is intended."
+        )
+    content: dict[str, Any] = {
+        "family": family,
+        "nominal": fam.describe_nominal() or family,
+        "records": summaries,
+        "blocking": blocking,
+        "warnings": warnings,
+        "jacobian": None,
+    }
+    try:
+        experiments = [fam.prepare(record, name) for record, name in recs]
+        nominal = unwrap(fam.nominal(experiments))
+    except ValueError as error:
+        blocking.append(f"the family's preprocessing refuses the records: {error}")
+    else:
+        ident = _jacobian_report(nominal, experiments)
+        content["jacobian"] = ident
+        for combo in ident["unidentifiable"]:
+            terms = ", ".join(f"{n} ({w:+.2f})" for n, w in combo["combination"].items())
+            blocking.append(
+                f"the nominal model's parameter combination of {terms} is not identifiable "
+                f"from these records (singular value {combo['relative']:.1e} of the largest)."
+            )
+    content["identifiable"] = not blocking
+    return CheckReport(content)
