@@ -24,6 +24,7 @@ from ._io import (
     save_results_csv as save_results_csv,
 )
 from ._progress import Interrupted as Interrupted, Progress as Progress, log_to as log_to
+from ._version import __version__ as __version__
 from .calibration import (
     CalibrationResult as CalibrationResult,
     FitReport as FitReport,
@@ -81,4 +82,3 @@ from .models import (
 )
 from .studies import fit_first_order as fit_first_order, idim_ls as idim_ls
 
-__version__ = "0.1.0"

@@ -40,6 +40,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._version import __version__
+
 __all__ = [
     "FORMAT_VERSION",
     "IncompatibleFileError",
@@ -82,12 +84,7 @@ class IncompatibleFileError(ValueError):
 
 
 def _version() -> str:
-    try:
-        from . import __version__
-
-        return __version__
-    except ImportError:  # pragma: no cover - during package initialisation
-        return "unknown"
+    return __version__
 
 
 def _ref(obj: Any) -> str:

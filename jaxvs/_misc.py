@@ -1,5 +1,6 @@
-"""Ahead-of-time compilation with a small cache, so that compile and run time can be
-reported separately (measured outside `jit`, as the benchmarks do)."""
+"""Helpers shared by every folder of jaxvs: ahead-of-time compilation with a small cache
+(compile and run time reported separately, measured outside `jit`, as the benchmarks do),
+the tracer test, and a matrix exponential that compiles fast."""
 
 import collections
 import time
@@ -8,8 +9,10 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
 
-__all__ = ["is_traced", "timed_call"]
+__all__ = ["expm", "is_traced", "timed_call"]
 
 _CACHE: collections.OrderedDict = collections.OrderedDict()
 _CACHE_SIZE = 32
@@ -67,3 +70,31 @@ def timed_call(fn: Callable, *args: Any) -> tuple[Any, float, float]:
     out_dyn = jax.block_until_ready(compiled(dynamic))
     run_time = time.perf_counter() - t1
     return eqx.combine(out_dyn, out_static), compile_time, run_time
+
+
+# Padé (7, 7) coefficients of exp (Higham, "The scaling and squaring method for the matrix
+# exponential revisited", SIAM J. Matrix Anal. Appl. 26, 2005, Table 2.3).
+_PADE7 = (17297280.0, 8648640.0, 1995840.0, 277200.0, 25200.0, 1512.0, 56.0, 1.0)
+
+
+def expm(m: Float[Array, "n n"]) -> Float[Array, "n n"]:
+    """Matrix exponential of a small matrix by scaling and squaring with Padé (7, 7).
+
+    The scaled matrix has 1-norm <= 0.5, well inside the range where Padé (7, 7) is
+    accurate to unit roundoff (θ_7 = 0.95, Higham 2005). Unlike `jax.scipy.linalg.expm`
+    it has one fixed branch, so it compiles quickly under `jacfwd` and inside solver
+    loops; the squarings are a fixed-length loop (masked), so reverse mode works too.
+    """
+    n = m.shape[0]
+    norm = jnp.max(jnp.sum(jnp.abs(m), axis=0))
+    s = jnp.clip(jnp.ceil(jnp.log2(jnp.maximum(norm, 1e-300) / 0.5)), 0, 60)
+    x = m / 2.0**s
+    eye = jnp.eye(n, dtype=m.dtype)
+    x2 = x @ x
+    x4 = x2 @ x2
+    x6 = x4 @ x2
+    b = _PADE7
+    u = x @ (b[7] * x6 + b[5] * x4 + b[3] * x2 + b[1] * eye)
+    v = b[6] * x6 + b[4] * x4 + b[2] * x2 + b[0] * eye
+    e = jnp.linalg.solve(v - u, v + u)
+    return jax.lax.fori_loop(0, 60, lambda i, e: jnp.where(i < s, e @ e, e), e)

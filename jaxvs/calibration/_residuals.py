@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, PyTree
 
+from .._misc import expm
 from ..data import Record
 from ..models import AbstractLinearModel, AbstractModel, frequency_response, map_batch, simulate
 
@@ -367,34 +368,6 @@ def _faddeev_leverrier(a: Float[Array, "n n"]) -> Float[Array, " n1"]:
     return jnp.stack(coeffs)
 
 
-# Padé (7, 7) coefficients of exp (Higham, "The scaling and squaring method for the matrix
-# exponential revisited", SIAM J. Matrix Anal. Appl. 26, 2005, Table 2.3).
-_PADE7 = (17297280.0, 8648640.0, 1995840.0, 277200.0, 25200.0, 1512.0, 56.0, 1.0)
-
-
-def _expm(m: Float[Array, "n n"]) -> Float[Array, "n n"]:
-    """Matrix exponential of a small matrix by scaling and squaring with Padé (7, 7).
-
-    The scaled matrix has 1-norm <= 0.5, well inside the range where Padé (7, 7) is
-    accurate to unit roundoff (θ_7 = 0.95, Higham 2005). Unlike `jax.scipy.linalg.expm`
-    it has one fixed branch, so it compiles quickly under `jacfwd` and inside solver
-    loops; the squarings are a fixed-length loop (masked), so reverse mode works too.
-    """
-    n = m.shape[0]
-    norm = jnp.max(jnp.sum(jnp.abs(m), axis=0))
-    s = jnp.clip(jnp.ceil(jnp.log2(jnp.maximum(norm, 1e-300) / 0.5)), 0, 60)
-    x = m / 2.0**s
-    eye = jnp.eye(n, dtype=m.dtype)
-    x2 = x @ x
-    x4 = x2 @ x2
-    x6 = x4 @ x2
-    b = _PADE7
-    u = x @ (b[7] * x6 + b[5] * x4 + b[3] * x2 + b[1] * eye)
-    v = b[6] * x6 + b[4] * x4 + b[2] * x2 + b[0] * eye
-    e = jnp.linalg.solve(v - u, v + u)
-    return jax.lax.fori_loop(0, 60, lambda i, e: jnp.where(i < s, e @ e, e), e)
-
-
 def _arx_form(model: AbstractLinearModel, dt: Any) -> tuple[Array, Array]:
     """`(a, b)` of the ZOH-discretised SISO model `B(q⁻¹)/A(q⁻¹)`, `a_0 = 1`.
 
@@ -408,7 +381,7 @@ def _arx_form(model: AbstractLinearModel, dt: Any) -> tuple[Array, Array]:
     A, B, C, D = ss.A, ss.B, ss.C, ss.D
     n = A.shape[0]
     aug = jnp.zeros((n + 1, n + 1), A.dtype).at[:n, :n].set(A).at[:n, n:].set(B)
-    e = _expm(aug * dt)
+    e = expm(aug * dt)
     ad, bd = e[:n, :n], e[:n, n:]
     a = _faddeev_leverrier(ad)
     h = [D[0, 0]]

@@ -12,6 +12,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
+from .._misc import is_traced
+
 # What an FRF relates (Ewins, *Modal Testing*, 2000, ch. 1): response per force as
 # displacement (receptance), velocity (mobility) or acceleration (accelerance); a response
 # per response is a transmissibility (study 002, eq. 6); "frf" is anything else.
@@ -20,10 +22,6 @@ FRF_KINDS = ("frf", "receptance", "mobility", "accelerance", "transmissibility")
 # Heuristic: estimated coherences are |Sxy|²/(Sxx·Syy) and exceed 1 by rounding only
 # (a few ulp in float64, ~1e-6 in float32); anything further outside [0, 1] is a bug.
 _COHERENCE_SLACK = 1e-4
-
-
-def _is_traced(x: Any) -> bool:
-    return isinstance(x, jax.core.Tracer)
 
 
 def _freeze_metadata(metadata: Mapping[str, Any] | None) -> tuple[tuple[str, Any], ...]:
@@ -249,7 +247,7 @@ class FRFData(eqx.Module):
 
         `ValueError` when `f_min > f_max` or when no frequency lies in the band.
         """
-        if _is_traced(self.frequency) or self.frequency.ndim != 1:
+        if is_traced(self.frequency) or self.frequency.ndim != 1:
             raise TypeError(
                 "FRFData.select: needs one concrete frequency grid; call it outside "
                 "jax.jit/jax.vmap."
@@ -285,14 +283,14 @@ class FRFData(eqx.Module):
         unit_in = self.input_unit or "?"
         unit_out = self.output_unit or "?"
         parts = [f"kind={self.kind!r}", f"{io}{batch}", f"{unit_in!r} -> {unit_out!r}"]
-        if _is_traced(self.frequency) or self.frequency.ndim != 1:
+        if is_traced(self.frequency) or self.frequency.ndim != 1:
             parts.append(f"{self.n_freq} frequencies")
         else:
             f = np.asarray(self.frequency)
             step = f"{f[1] - f[0]:.4g} Hz" if f.size > 1 else "-"
             parts.append(f"{f.size} frequencies {f[0]:.4g}..{f[-1]:.4g} Hz (df={step})")
         if self.coherence is not None:
-            if _is_traced(self.coherence):
+            if is_traced(self.coherence):
                 parts.append("coherence")
             else:
                 c = np.asarray(self.coherence)
@@ -305,7 +303,7 @@ class FRFData(eqx.Module):
 
 
 def _check_grid(frequency: Array) -> Array:
-    if _is_traced(frequency):
+    if is_traced(frequency):
         bad = ~jnp.all(jnp.isfinite(frequency)) | jnp.any(frequency < 0)
         if frequency.shape[0] > 1:
             bad = bad | jnp.any(jnp.diff(frequency) <= 0)
@@ -335,7 +333,7 @@ def _check_grid(frequency: Array) -> Array:
 
 
 def _check_finite(x: Array, name: str) -> Array:
-    if _is_traced(x):
+    if is_traced(x):
         return eqx.error_if(
             x,
             ~jnp.all(jnp.isfinite(x)),
@@ -354,7 +352,7 @@ def _check_finite(x: Array, name: str) -> Array:
 
 def _check_coherence_range(c: Array) -> Array:
     message = "FRFData: coherence must lie in [0, 1]."
-    if _is_traced(c):
+    if is_traced(c):
         return eqx.error_if(c, jnp.any((c < 0) | (c > 1 + _COHERENCE_SLACK)), message)
     values = np.asarray(c)
     if values.size and (values.min() < 0 or values.max() > 1 + _COHERENCE_SLACK):

@@ -15,12 +15,12 @@ import math
 from typing import Literal, NamedTuple
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from .._custom_types import RealScalarLike
+from .._misc import is_traced
 from ..data import FRFData
 from ._windows import _ALIASES, _check_fs, get_window
 
@@ -57,10 +57,6 @@ class _Segments(NamedTuple):
 # ---------------------------------------------------------------------------------------
 
 
-def _is_traced(x) -> bool:
-    return isinstance(x, jax.core.Tracer)
-
-
 def _sampling_rate(fs, fn: str) -> float:
     if isinstance(fs, (tuple, list)):
         if len(fs) != 2:
@@ -94,7 +90,7 @@ def _as_signal(x, name: str, fn: str) -> Array:
 
 
 def _check_finite(x: Array, name: str, fn: str) -> Array:
-    if _is_traced(x):
+    if is_traced(x):
         return eqx.error_if(
             x, ~jnp.all(jnp.isfinite(x)), f"{fn}: {name} contains NaN or inf samples."
         )
@@ -118,12 +114,12 @@ def _check_exciting(x: Array, name: str, role: str, records_axis: int | None, fn
         else "The sensor recorded no response: check that it is connected and scaled."
     )
     message = f"{fn}: the {role} {name} is constant, so it has no spectrum to divide by. {advice}"
-    xp = jnp if _is_traced(x) else np
-    values = x if _is_traced(x) else np.asarray(x)
+    xp = jnp if is_traced(x) else np
+    values = x if is_traced(x) else np.asarray(x)
     spread = xp.max(values, axis=-1) - xp.min(values, axis=-1)
     if records_axis is not None and spread.ndim > records_axis:
         spread = xp.max(spread, axis=records_axis)
-    if _is_traced(x):
+    if is_traced(x):
         return eqx.error_if(x, jnp.any(spread == 0), message)
     flat = np.reshape(spread, -1)
     if np.any(flat == 0):

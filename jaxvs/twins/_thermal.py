@@ -65,6 +65,7 @@ import jax.random as jr
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
+from .._misc import expm
 from ..data import Record
 
 __all__ = [
@@ -277,24 +278,6 @@ def thermal_speed_profile(
         jnp.searchsorted(ends, k, side="right", method="compare_all"), levels.shape[0] - 1
     )
     return levels[index], index
-
-
-def _expm(m: Float[Array, "n n"]) -> Float[Array, "n n"]:
-    """Matrix exponential by scaling and squaring with a degree-12 Taylor polynomial.
-
-    Heuristic: a fixed 2^-16 scaling (the network's `‖A dt‖` is `dt/τ` at most, below 1e3
-    for any `τ > dt/1000`, so the scaled matrix stays below 0.02 and the Taylor error is
-    negligible); 16 squarings amplify rounding to about 1e-11 relative. Compiles in a
-    fraction of the time of `jax.scipy.linalg.expm`, whose Padé branches dominated the
-    twin's compile time.
-    """
-    s = 16
-    x = m / 2.0**s
-    eye = jnp.eye(m.shape[0], dtype=m.dtype)
-    e = eye
-    for k in range(12, 0, -1):  # Horner: I + x/1 (I + x/2 (I + ...))
-        e = eye + (x @ e) / k
-    return jax.lax.fori_loop(0, s, lambda _, a: a @ a, e)
 
 
 def _triangle(phase: Array, duty: Array) -> Array:
@@ -544,7 +527,7 @@ class SpindleThermalTwin(eqx.Module):
         A, B = self._network()
         n, m = B.shape
         M = jnp.zeros((n + m, n + m), A.dtype).at[:n, :n].set(A).at[:n, n:].set(B)
-        E = _expm(M * dt)
+        E = expm(M * dt)
         return E[:n, :n], E[:n, n:]
 
     def boundary_temperatures(

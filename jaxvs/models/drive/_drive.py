@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._misc import is_traced
 from .._base import AbstractModel
 from .._nonlinear_simulate import (
     check_step,
@@ -73,10 +74,6 @@ def _param(x: ArrayLike, name: str, where: str) -> Array:
             "jax.vmap over a function that builds the model."
         )
     return x
-
-
-def _is_traced(tree) -> bool:
-    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
 
 class UnstableLoopError(ValueError):
@@ -660,7 +657,7 @@ class DriveAxis(AbstractModel):
                 f"sample_time = {self.sample_time:g} s; resample the reference to the "
                 "controller rate."
             )
-        if check and not _is_traced((self, r, fe, ua)):
+        if check and not is_traced((self, r, fe, ua)):
             # the step first: an unstable integration also shows as unstable sampled poles
             if self.sample_time is not None:
                 check_step(self.plant_poles(), dt / self.n_substeps, solver, where=where)
