@@ -284,19 +284,22 @@ def simulate_drive(p: dict, r_ctrl: np.ndarray | None, u_ol: np.ndarray | None, 
         if j % nc == 0:
             k_ctrl += 1
             qk = round(x_sens / res) * res
+            # dual-loop drive: with a load-side scale, the velocity loop still differences
+            # the motor encoder (collocated), only the position loop closes on the scale
+            qv = round(xm / res) * res if sensor_on_load else qk
             if closed:
                 rk = r_ctrl[k_ctrl]
                 v_ref = (rk - r_prev) / Tc
                 a_ref = (v_ref - v_ref_prev) / Tc
                 r_prev, v_ref_prev = rk, v_ref
-                v_raw = (qk - q_prev) / Tc if k_ctrl > 0 else 0.0
+                v_raw = (qv - q_prev) / Tc if k_ctrl > 0 else 0.0
                 v_est = alpha_v * v_est + (1 - alpha_v) * v_raw
                 ev = Kp * (rk - qk) + v_ref - v_est
                 integ += ev * Tc
                 u_cmd = Kv * (ev + integ / Ti) + kff * a_ref
             else:
                 u_cmd = float(u_ol[k_ctrl])
-            q_prev = qk
+            q_prev = qv
             pipe.append(u_cmd)
             u_hold = pipe.pop(0)
         if j % nr == 0:
@@ -1205,7 +1208,6 @@ def cases() -> list[Case]:
             "external-gravity-load",
             [EF],
             "gravityload",
-            loop="open",
             fs_rec=1000,
             fs_ctrl=1000,
             resolution=5e-6,
@@ -1382,13 +1384,23 @@ def cases() -> list[Case]:
 
 def select(all_cases: list[Case], n: int | None = None, family: str | None = None) -> list[Case]:
     """A deterministic, representative subset: per family, effect-free and effect cases
-    interleaved (every fourth case effect-free while any remain), families round-robin.
-    `n=None` keeps all."""
+    interleaved (every fourth case effect-free while any remain), the effect cases taking
+    each primary effect in turn (first variant A of every effect, then variant B, then
+    two-effect cases), families round-robin. `n=None` keeps all."""
     fams = [family] if family else ["drive", "tmf", "thermal"]
     queues = []
     for f in fams:
         free = [c for c in all_cases if c.family == f and c.effect_free]
-        eff = [c for c in all_cases if c.family == f and not c.effect_free]
+        single = [c for c in all_cases if c.family == f and len(c.effects) == 1]
+        groups: dict[str, list[Case]] = {}
+        for c in single:
+            groups.setdefault(c.primary, []).append(c)
+        eff = []
+        while any(groups.values()):
+            for g in groups.values():
+                if g:
+                    eff.append(g.pop(0))
+        eff += [c for c in all_cases if c.family == f and len(c.effects) > 1]
         q = []
         while free or eff:
             if free and (len(q) % 4 == 0 or not eff):
