@@ -735,7 +735,6 @@ def _tmf_excitation(kind, rng, n_fine, dt_f, fs):
         t = np.arange(n_fine) * dt_f
         T = t[-1] / 3
         x = 3e-6 * ss.chirp(t % T, 2.0, T, 0.42 * fs, method="logarithmic")
-        x *= 1 + 0.0 * t
         x += 20e-6 * np.sin(2 * np.pi * 0.7 * t + rng.uniform(0, 6.3))
     fade = _smoothstep(np.arange(n_fine) / (0.02 * n_fine))
     return x * fade
@@ -814,7 +813,6 @@ def _tmf_records(case: Case) -> tuple[list[Record], list[Record], dict]:
                     teeth = np.maximum(np.sin(2 * np.pi * f_tooth * t), 0) ** 2
                     f_true = env * (0.3 + teeth)
                 f_true = f_true - f_true[0]
-                rel = x_t - x_e
                 if "milling" in v or "dynamometer" in v:
                     comp = [(m_[0], m_[1], 1.0) for m_ in _tmf_modes(case, rng, y, base)[:2]]
                     defl = np.zeros(n_fine)
@@ -826,7 +824,6 @@ def _tmf_records(case: Case) -> tuple[list[Record], list[Record], dict]:
                     scale = force_ratio * np.std(x_t) / max(np.std(defl), 1e-300)
                     x_t = x_t + scale * defl
                     truth["compliance"] = scale
-                    del rel
                 if "dynamometer" in v:
                     om = 2 * np.pi * f_dyn
                     f_meas = 0.9 * _foh_filter([om * om], [1.0, 0.1 * om, om * om], dt_f, f_true)
