@@ -51,6 +51,7 @@ velocity estimation by differencing and filters, force sample-and-hold, white an
 coloured noise, temperature sensor quantisation.
 
     python benchmarks/blind_plants.py          # list the cases and time their generation
+    python benchmarks/blind_plants.py --write DIR [--only NAME,...]   # .npz for the CLI
 
 `cases()` is the deterministic case list; `generate(case)` returns
 `(calibration_records, validation_records, info)` of `jaxvs.data.Record`s that
@@ -74,7 +75,7 @@ import scipy.signal as ss
 
 from jaxvs.data import Record
 
-__all__ = ["Case", "cases", "generate", "select"]
+__all__ = ["Case", "cases", "generate", "select", "write_case"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -1431,10 +1432,60 @@ def generate(case: Case) -> tuple[list[Record], list[Record], dict]:
     return cal, val, info
 
 
-def main() -> int:
+def write_case(case: Case, folder) -> list[str]:
+    """Write a case for the CLI (`jaxvs diagnose cal*.npz --validate val*.npz`): one `.npz`
+    per record (a tmf position kept in the metadata becomes a constant `y` column) and
+    `truth.json` (effects, primary, true parameters, seed). Returns the files written."""
+    import json
+    import pathlib
+
+    from jaxvs.data import save_npz
+
+    out = pathlib.Path(folder) / case.name
+    out.mkdir(parents=True, exist_ok=True)
+    cal, val, info = generate(case)
+    files = []
+    for role, recs in (("cal", cal), ("val", val)):
+        for i, rec in enumerate(recs):
+            if "y" in rec.metadata and "y" not in rec.names:
+                sig = {k: np.asarray(rec[k]) for k in rec.names}
+                sig["y"] = np.full(len(rec), float(rec.metadata["y"]))
+                rec = Record(sig, dt=rec.dt, metadata=rec.metadata)
+            files.append(str(save_npz(rec, out / f"{role}{i + 1}.npz")))
+    truth = {
+        "case": case.name,
+        "family": case.family,
+        "variant": case.variant,
+        "seed": case.seed,
+        "effects": list(case.effects),
+        "primary": case.primary,
+        "primary_alternatives": list(case.primary_alternatives),
+        "truth": info["truth"],
+    }
+    (out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    return files
+
+
+def main(argv=None) -> int:
+    import argparse
+
+    p = argparse.ArgumentParser(description="List (and time) the blind cases, or write them.")
+    p.add_argument("--write", default=None, help="folder: write every case as .npz files")
+    p.add_argument("--only", default=None, help="comma-separated case names")
+    args = p.parse_args(argv)
     all_cases = cases()
+    if args.only:
+        names = set(args.only.split(","))
+        unknown = names - {c.name for c in all_cases}
+        if unknown:
+            raise SystemExit(f"unknown case(s) {sorted(unknown)}")
+        all_cases = [c for c in all_cases if c.name in names]
     n_free = sum(c.effect_free for c in all_cases)
     print(f"{len(all_cases)} cases, {n_free} effect-free ({100 * n_free / len(all_cases):.0f} %)")
+    if args.write:
+        for c in all_cases:
+            print(c.name, len(write_case(c, args.write)), "files")
+        return 0
     for c in all_cases:
         t0 = time.perf_counter()
         cal, val, info = generate(c)

@@ -302,3 +302,23 @@ def test_thermal_first_order_matches_exponential(bp):
     tb, tc, v = (np.asarray(r[s]) for s in ("T_bearing", "T_chassis", "v_m"))
     static = tc + (p["q_b0"] + p["q_b1"] * v / p["vmax"]) / p["G_bc"]
     assert np.max(np.abs(tb - static)) < 1e-3  # e^(-100) of a step left, chassis drift
+
+
+def test_write_case_round_trip(bp, tmp_path):
+    """Written cases load back (for the CLI) with the same samples; a tmf position kept in
+    the metadata becomes a constant `y` column; truth.json carries the ground truth."""
+    import json
+
+    from jaxvs.data import load
+
+    c = _case(bp, "tmf-position-overhang")
+    files = bp.write_case(c, tmp_path)
+    cal, val, info = bp.generate(c)
+    assert len(files) == len(cal) + len(val)
+    for f, rec in zip(files, cal + val):
+        back = load(f)
+        np.testing.assert_array_equal(np.asarray(back["x_t"]), np.asarray(rec["x_t"]))
+        np.testing.assert_array_equal(np.asarray(back["y"]), float(rec.metadata["y"]))
+        assert back.dt == pytest.approx(rec.dt, rel=1e-12)
+    truth = json.loads((tmp_path / c.name / "truth.json").read_text())
+    assert truth["effects"] == ["position_dependence"] and truth["truth"] == info["truth"]
