@@ -31,7 +31,7 @@ cells = [
         "VelocityLoop,\n"
         "    ViscousFriction, XYTable, ballbar_test)\n"
         "from jaxvs.data import load_emps, trapezoid\n"
-        "from jaxvs.calibration import calibrate_drive\n"
+        "from jaxvs.studies import calibrate_drive\n"
         "from jaxvs.signal import cwt_morlet, cwt_ridge, cwt_damping\n"
         "from jaxvs.plotting import ballbar_plot, bode_plot, scalogram_plot\n"
         "%matplotlib inline\n"
