@@ -712,3 +712,22 @@ def test_errors_under_jit(rng):
         f(jnp.asarray(bad), jnp.asarray(y))
     with pytest.raises(eqx.EquinoxRuntimeError, match="input x is constant"):
         f(jnp.ones(1000), jnp.asarray(y))
+
+
+def test_welch_options_object_equals_keywords():
+    """`welch=Welch(...)` is the same estimate as its fields given as keywords; mixing the
+    two, or an unknown option, is refused."""
+    from jaxvs.signal import Welch, frf_h2
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=4096)
+    y = np.convolve(x, [1.0, 0.5, 0.2])[:4096] + 0.1 * rng.normal(size=4096)
+    opts = Welch(nperseg=256, noverlap=64, window="hamming")
+    a = frf_h2(x, y, 1000.0, nperseg=256, noverlap=64, window="hamming")
+    b = frf_h2(x, y, 1000.0, welch=opts)
+    np.testing.assert_array_equal(np.asarray(a.H), np.asarray(b.H))  # same arithmetic
+    assert a.metadata["nperseg"] == 256 and b.metadata["noverlap"] == 64
+    with pytest.raises(TypeError, match="not both"):
+        frf_h2(x, y, 1000.0, welch=opts, nperseg=128)
+    with pytest.raises(TypeError, match="unknown option.*nperseq"):
+        frf_h2(x, y, 1000.0, nperseq=128)

@@ -11,6 +11,7 @@ from ._differentiate import differentiate as differentiate
 from ._filter import decimate as decimate, filtfilt_lowpass as filtfilt_lowpass
 from ._resample import resample as resample
 from ._spectral import (
+    Welch as Welch,
     coherence as coherence,
     csd as csd,
     frf_h1 as frf_h1,

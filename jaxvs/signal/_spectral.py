@@ -11,8 +11,10 @@ averaged. With `records_axis`, repeated records (e.g. impact hits) are averaged 
 an estimate rests on `n_averages = n_segments × n_records` blocks.
 """
 
+import dataclasses
 import math
-from typing import Literal, NamedTuple
+from collections.abc import Callable
+from typing import Any, Literal, NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -707,11 +709,11 @@ _FRF_DOC = """FRF estimate `{formula}` from an input and an output record, with 
   broadcast with `x` (one input, several responses: `x` `(time,)`, `y` `(out, time)`).
 - `fs`: sampling rate [Hz] (static under `jax.jit`), or a pair `(fs_x, fs_y)` that must
   agree.
-- `window`: a window name / samples shared by both channels, or a pair
-  `(window_x, window_y)` (impact testing: see `impact_windows`).
-- `nperseg`, `noverlap`, `nfft`, `df`, `detrend`: Welch options as in `csd`.
-- `records_axis`: a leading axis of repeated records (e.g. 5 impact hits), averaged too;
-  then each whole record is one block unless `nperseg`/`df` says otherwise.
+- `welch`: a [`Welch`][] options object, or its fields as keywords: `window` (a name /
+  samples shared by both channels, or a pair `(window_x, window_y)`, impact testing: see
+  `impact_windows`), `nperseg`, `noverlap`, `nfft`, `df`, `detrend` (as in `csd`),
+  `records_axis` (a leading axis of repeated records, e.g. 5 impact hits, averaged too;
+  then each whole record is one block unless `nperseg`/`df` says otherwise).
 - `input_unit`, `output_unit`: unit labels stored in the result (e.g. `"N"`, `"m/s^2"`).
 - `kind`: what the FRF is (`"frf"`, `"receptance"`, `"mobility"`, `"accelerance"`).
 
@@ -734,109 +736,72 @@ the value checks are `eqx.error_if`.
 """
 
 
-def frf_h1(
-    x: Float[ArrayLike, "*batch time"],
-    y: Float[ArrayLike, "*batch time"],
-    fs,
-    *,
-    window="hann",
-    nperseg: int | None = None,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    df: float | None = None,
-    detrend: Detrend = "constant",
-    records_axis: int | None = None,
-    input_unit: str = "",
-    output_unit: str = "",
-    kind: str = "frf",
-) -> FRFData:
-    return _frf(
-        "h1",
-        x,
-        y,
+@dataclasses.dataclass(frozen=True)
+class Welch:
+    """Welch averaging options of the FRF estimators (`frf_h1`, `frf_h2`, `frf_hv`), as one
+    frozen object that can be built once and passed to several estimates.
+
+    **Fields:** `window` (a name / samples shared by both channels, or a pair
+    `(window_x, window_y)`), `nperseg`, `noverlap`, `nfft`, `df` [Hz], `detrend` (as in
+    `csd`), `records_axis` (a leading axis of repeated records, averaged too).
+    """
+
+    window: Any = "hann"
+    nperseg: int | None = None
+    noverlap: int | None = None
+    nfft: int | None = None
+    df: float | None = None
+    detrend: Any = "constant"
+    records_axis: int | None = None
+
+
+def _frf_estimator(estimator: str) -> Callable[..., FRFData]:
+    """The public estimator `frf_<estimator>`: `welch=Welch(...)`, or its fields as
+    keywords (`nperseg=...`), never both."""
+    name = f"frf_{estimator}"
+
+    def estimate(
+        x: Float[ArrayLike, "*batch time"],
+        y: Float[ArrayLike, "*batch time"],
         fs,
-        window=window,
-        nperseg=nperseg,
-        noverlap=noverlap,
-        nfft=nfft,
-        df=df,
-        detrend=detrend,
-        records_axis=records_axis,
-        input_unit=input_unit,
-        output_unit=output_unit,
-        kind=kind,
-        fn="frf_h1",
-    )
+        *,
+        welch: Welch | None = None,
+        input_unit: str = "",
+        output_unit: str = "",
+        kind: str = "frf",
+        **options: Any,
+    ) -> FRFData:
+        if welch is not None and options:
+            raise TypeError(
+                f"{name}: give the Welch options either as welch=Welch(...) or as keywords "
+                f"({', '.join(options)}), not both."
+            )
+        fields = {f.name for f in dataclasses.fields(Welch)}
+        unknown = sorted(set(options) - fields)
+        if unknown:
+            raise TypeError(
+                f"{name}: unknown option(s) {unknown}; the Welch options are {sorted(fields)}."
+            )
+        w = Welch(**options) if welch is None else welch
+        return _frf(
+            estimator,
+            x,
+            y,
+            fs,
+            **dataclasses.asdict(w),
+            input_unit=input_unit,
+            output_unit=output_unit,
+            kind=kind,
+            fn=name,
+        )
+
+    estimate.__name__ = estimate.__qualname__ = name
+    return estimate
 
 
-def frf_h2(
-    x: Float[ArrayLike, "*batch time"],
-    y: Float[ArrayLike, "*batch time"],
-    fs,
-    *,
-    window="hann",
-    nperseg: int | None = None,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    df: float | None = None,
-    detrend: Detrend = "constant",
-    records_axis: int | None = None,
-    input_unit: str = "",
-    output_unit: str = "",
-    kind: str = "frf",
-) -> FRFData:
-    return _frf(
-        "h2",
-        x,
-        y,
-        fs,
-        window=window,
-        nperseg=nperseg,
-        noverlap=noverlap,
-        nfft=nfft,
-        df=df,
-        detrend=detrend,
-        records_axis=records_axis,
-        input_unit=input_unit,
-        output_unit=output_unit,
-        kind=kind,
-        fn="frf_h2",
-    )
-
-
-def frf_hv(
-    x: Float[ArrayLike, "*batch time"],
-    y: Float[ArrayLike, "*batch time"],
-    fs,
-    *,
-    window="hann",
-    nperseg: int | None = None,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    df: float | None = None,
-    detrend: Detrend = "constant",
-    records_axis: int | None = None,
-    input_unit: str = "",
-    output_unit: str = "",
-    kind: str = "frf",
-) -> FRFData:
-    return _frf(
-        "hv",
-        x,
-        y,
-        fs,
-        window=window,
-        nperseg=nperseg,
-        noverlap=noverlap,
-        nfft=nfft,
-        df=df,
-        detrend=detrend,
-        records_axis=records_axis,
-        input_unit=input_unit,
-        output_unit=output_unit,
-        kind=kind,
-        fn="frf_hv",
-    )
+frf_h1 = _frf_estimator("h1")
+frf_h2 = _frf_estimator("h2")
+frf_hv = _frf_estimator("hv")
 
 
 frf_h1.__doc__ = _FRF_DOC.format(
