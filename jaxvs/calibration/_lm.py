@@ -202,32 +202,34 @@ def _finite(*xs) -> Array:
     return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in xs]))
 
 
-def _newton_converged(theta, cost, jtj, jtr, rtol, atol=0.0) -> Array:
-    """Convergence of the Gauss-Newton model at `θ` (no step needed).
+def _newton_converged(theta, cost, jtj, jtr, rtol, atol=0.0) -> tuple[Array, Array]:
+    """Convergence of the Gauss-Newton model at `θ` (no step needed), and the undamped
+    Gauss-Newton step `δ = -(JᵀJ)⁻¹ Jᵀr` itself.
 
-    With the undamped step `δ = -(JᵀJ)⁻¹ Jᵀr`: the largest reduction the model predicts,
-    `½ (Jᵀr)ᵀ (JᵀJ)⁻¹ Jᵀr`, is below `rtol · cost` (noisy data: parameters within a tiny
-    fraction of their standard errors of the optimum, however flat some directions are),
-    or `δ` is below `rtol` relative to `θ` in the unit-diagonal scaling (zero-residual
-    data, where the relative reduction stays O(1) until rounding).
+    `atol = 0`: the largest reduction the model predicts, `½ (Jᵀr)ᵀ (JᵀJ)⁻¹ Jᵀr`, is below
+    `rtol · cost` (noisy data: parameters within a tiny fraction of their standard errors
+    of the optimum, however flat some directions are), or `δ` is below `rtol` relative to
+    `θ` in the unit-diagonal scaling (zero-residual data, where the relative reduction
+    stays O(1) until rounding).
 
-    With `atol > 0` (a Python number) the test is optimistix's Cauchy test instead, per
-    entry: `|δ_i| <= atol + rtol |θ_i|` (the solver [`LevenbergMarquardt`][], whose
-    parameters are normalised to O(1) by `calibrate`); [`lm_step`][] applies it to the
-    step just taken.
+    `atol > 0` (a Python number): optimistix's Cauchy test, per entry
+    `|δ_i| <= atol + rtol |θ_i|` (the solver [`LevenbergMarquardt`][], whose parameters
+    `calibrate` normalises to O(1)); [`lm_step`][] then takes that last, tiny `δ`.
     """
     d = jnp.diagonal(jtj)
     sc = 1.0 / jnp.sqrt(jnp.where(d > 0, d, 1.0))
     m = jtj * sc[:, None] * sc[None, :] + 1e-13 * jnp.eye(jtj.shape[0], dtype=jtj.dtype)
     chol = jnp.linalg.cholesky(m)
     y = jax.scipy.linalg.cho_solve((chol, True), -jtr * sc)  # scaled Newton step
-    pred = -0.5 * jnp.dot(jtr * sc, y)
+    delta = y * sc
     if atol > 0:
-        cauchy = jnp.all(jnp.abs(y * sc) <= atol + rtol * jnp.abs(theta))
-        return _finite(y) & cauchy | (cost == 0)
-    small_pred = pred <= rtol * cost
-    small_step = jnp.linalg.norm(y) <= rtol * (jnp.linalg.norm(theta / sc) + rtol)
-    return _finite(y) & (small_pred | small_step) | (cost == 0)
+        ok = jnp.all(jnp.abs(delta) <= atol + rtol * jnp.abs(theta))
+    else:
+        pred = -0.5 * jnp.dot(jtr * sc, y)
+        small_pred = pred <= rtol * cost
+        small_step = jnp.linalg.norm(y) <= rtol * (jnp.linalg.norm(theta / sc) + rtol)
+        ok = small_pred | small_step
+    return _finite(y) & ok | (cost == 0), delta
 
 
 def lm_init(evaluate, theta0: Array, args: Any, rtol, mu0: float = 1e-3, atol=0.0) -> LMState:
@@ -243,7 +245,7 @@ def lm_init(evaluate, theta0: Array, args: Any, rtol, mu0: float = 1e-3, atol=0.
         mu=jnp.asarray(mu0, dtype),
         nu=jnp.asarray(2.0, dtype),
         num_steps=jnp.asarray(0),
-        converged=finite & _newton_converged(theta0, cost0, jtj0, jtr0, rtol, atol),
+        converged=finite & _newton_converged(theta0, cost0, jtj0, jtr0, rtol, atol)[0],
         nonfinite=~finite,
     )
 
@@ -316,16 +318,19 @@ def lm_step(
     # the boundary further by raising the damping gains ~1e-6 relative in many steps.
     at_boundary = (frac < 1) & (pred <= rtol * s.cost)
     if atol > 0:
-        # optimistix's Cauchy test, per entry |δ_i| <= atol + rtol |θ_i|, on the step just
-        # taken (the quadratic convergence of Gauss-Newton has then put θ well inside the
-        # tolerance) or on the undamped Newton step from θ (a noisy optimum, where steps
-        # are rejected at the rounding floor of the cost). A step kept small only by the
-        # damping is never taken for convergence.
-        small = jnp.all(jnp.abs(delta) <= atol + rtol * jnp.abs(theta))
-        newton = _newton_converged(theta, cost, jtj, jtr, rtol, atol)
-        converged = at_boundary | (accept & small) | newton
+        # optimistix's Cauchy test on the undamped Gauss-Newton step from the new θ (a step
+        # kept small only by the damping is never taken for convergence); once it holds,
+        # that last tiny step is taken: exact for a linear problem, quadratically small
+        # error otherwise, and harmless at a noisy optimum where damped steps are rejected.
+        newton, step = _newton_converged(theta, cost, jtj, jtr, rtol, atol)
+        theta = jnp.where(newton & _finite(step), theta + step, theta)
+        # A rejected step already inside the tolerance: no move that small lowers the
+        # cost, so θ is stationary to rounding (a noisy, ill-conditioned optimum, where
+        # the Newton step itself is rounding noise).
+        stalled = ~accept & jnp.all(jnp.abs(delta) <= atol + rtol * jnp.abs(s.theta))
+        converged = at_boundary | newton | stalled
     else:
-        converged = at_boundary | _newton_converged(theta, cost, jtj, jtr, rtol)
+        converged = at_boundary | _newton_converged(theta, cost, jtj, jtr, rtol)[0]
     return LMState(
         theta=theta,
         cost=cost,
