@@ -52,7 +52,12 @@ from ._base import (
     NotIdentifiable,
     check,
 )
-from ._stats import effective_samples, quantisation_step, white_noise_floor
+from ._stats import (
+    difference_noise_sigma,
+    effective_samples,
+    quantisation_step,
+    white_noise_floor,
+)
 
 __all__ = ["DriveFamily", "RigidAxis"]
 
@@ -313,7 +318,7 @@ class Resonance(AbstractAdditiveEffect):
         return 0
 
     def admissible(self, context):
-        m, c = (float(x) for x in np.asarray(self.size))
+        m = float(np.asarray(self.size)[0])
         f = _f(self.omega) / (2 * math.pi)
         z = _f(self.zeta)
         lo, hi = context.band_hz
@@ -324,7 +329,8 @@ class Resonance(AbstractAdditiveEffect):
             (lo <= f <= hi, f"f = {f:.4g} Hz outside the analysed band [{lo:.3g}, {hi:.4g}] Hz"),
             (m > 0, f"non-positive resonating mass m_r = {m:.4g} kg"),
             (m <= mass, f"resonating mass m_r = {m:.4g} kg above the whole mass {mass:.4g} kg"),
-            (c >= 0, f"negative viscous friction of the load c_r = {c:.4g} N·s/m"),
+            # c_r is not ruled: at low frequency its term is a mass-like correction that
+            # trades with the nominal M and Fv, so its sign is not a friction's
         )
 
     def parameters(self):
@@ -812,7 +818,7 @@ class DriveFamily(AbstractFamily):
         95 % of the force variance): the closed loop is simulated at the record's sampling
         with that controller, the rigid axis (exact zero-order-hold discretisation), the
         record's quantisation step (a random encoder zero per draw) and white force noise
-        of the controller fit's residual level. Otherwise (open loop, or no identifiable
+        of the controller fit's residual level (its white part). Otherwise (open loop, or no identifiable
         controller) the record's own motion, low-pass filtered, is replayed: the force is
         the nominal model's, plus white noise of the record's level, the position
         re-quantised. Each simulated record then goes through the same preprocessing."""
@@ -966,8 +972,8 @@ def identify_controller(
 
     **Returns:** `(coefficients, r2, sigma)`: coefficients in the order
     `a_0..a_{L−1}, b_0..b_{L−1}, c, d`, the share of the force variance explained, and
-    the standard deviation of the residual [N] (the force measurement noise when the
-    controller is linear)."""
+    the standard deviation of the residual's white part [N] (the force measurement
+    noise when the controller is linear)."""
     n = q.size
     win = np.lib.stride_tricks.sliding_window_view
     rp = np.concatenate([np.full(taps - 1, r[0]), r])
@@ -982,7 +988,10 @@ def identify_controller(
     res = u - phi @ coef
     var_u = float(np.var(u))
     r2 = 1.0 - float(np.var(res)) / var_u if var_u > 0 else 0.0
-    return coef, r2, float(np.std(res))
+    # the white part of the residual (robust successive differences): a disturbance the
+    # record carries besides the controller output (force pulses injected into the drive)
+    # is not measurement noise and does not belong in the null
+    return coef, r2, difference_noise_sigma(res)
 
 
 def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Record]:

@@ -88,6 +88,19 @@ class DiagnosisReport:
 
     def to_markdown(self) -> str:
         c = self.content
+        if c.get("not_identifiable"):
+            return "\n".join(
+                [
+                    f"# Sim-to-real gap diagnosis — family `{c['family']}`",
+                    "",
+                    f"Nominal model: {c['nominal']['model']}.",
+                    "",
+                    "## Not identifiable: no verdict",
+                    "",
+                    f"{c['not_identifiable']}.",
+                    "",
+                ]
+            )
         g = c["gap"]
         v = c["verdict"]
         pct = lambda x: "—" if x is None else f"{100 * x:.2f} %"
@@ -109,9 +122,10 @@ class DiagnosisReport:
             )
         else:
             lines.append(
-                "No candidate effect passed (held-out gap reduction with a bootstrap interval "
-                "excluding zero, ΔBIC > 10): the nominal model is adequate up to the noise "
-                f"and the effects tested. Validation gap {pct(g['validation'])}, noise floor "
+                "No candidate effect passed (an admissible fit whose held-out gap reduction "
+                "has a bootstrap interval excluding zero and exceeds what it gains on "
+                "effect-free records of the same set-up): the nominal model is adequate up to "
+                f"the noise floor and the effects tested. Validation gap {pct(g['validation'])}, noise floor "
                 f"{pct(g['noise_floor'])}."
             )
         lines += [
@@ -153,12 +167,13 @@ class DiagnosisReport:
             "",
             "## Candidate effects (best first)",
             "",
-            "| effect | testable | signature | validation gap | shrink [95 % CI] | ΔBIC | accepted | parameters |",
-            "|---|---|---|---|---|---|---|---|",
+            "| effect | testable | signature | validation gap | shrink [95 % CI] | ΔBIC | "
+            "null 95 % | admissible | accepted | parameters |",
+            "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for k in c["candidates"]:
             if not k["testable"]:
-                lines.append(f"| {k['effect']} | no: {k['reason']} | | | | | no | |")
+                lines.append(f"| {k['effect']} | no: {k['reason']} | | | | | | | no | |")
                 continue
             ci = k.get("shrink_interval")
             shr = (
@@ -168,9 +183,14 @@ class DiagnosisReport:
             )
             par = ", ".join(f"{n} = {val:.4g}" for n, val in (k.get("parameters") or {}).items())
             dbic = "—" if k.get("delta_bic") is None else f"{k['delta_bic']:.1f}"
+            null = pct(k.get("null_p95"))
+            adm = "yes" if k.get("admissible") else f"no: {k.get('reason')}"
+            if k.get("admissible") is None:
+                adm = "—"
+            acc = "**yes**" if k["accepted"] else f"no ({k.get('rejected_by') or 'not tried'})"
             lines.append(
                 f"| {k['effect']} | yes | {k['signature']:.3f} | {pct(k.get('validation_gap'))} | "
-                f"{shr} | {dbic} | {'**yes**' if k['accepted'] else 'no'} | {par} |"
+                f"{shr} | {dbic} | {null} | {adm} | {acc} | {par} |"
             )
         lines += ["", f"Run time: {c['timing']['seconds']:.1f} s.", ""]
         if c.get("figures"):
