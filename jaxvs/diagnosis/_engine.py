@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -297,6 +297,26 @@ def _first_failure(c: CandidateResult, min_shrink: float, min_delta_bic: float) 
     return None
 
 
+def choose(passing: Sequence[CandidateResult], accepted: Sequence[str]) -> CandidateResult:
+    """The candidate to add among those that pass every test: by held-out evidence, the
+    largest reduction of the validation gap; but a base before its own extension when
+    both pass (the principle of marginality: Stribeck friction only after Coulomb)."""
+    names = {c.effect for c in passing}
+    eligible = [c for c in passing if not (c.extends in names and c.extends not in accepted)]
+    return max(eligible, key=lambda c: c.reduction)
+
+
+def primary_effect(
+    accepted: Sequence[str], candidates: Mapping[str, CandidateResult]
+) -> str | None:
+    """The accepted effect that explains most of the held-out gap: the largest validation
+    gap reduction it brought when it was added (an extension that replaced its base
+    counts with the base's reduction, as itself)."""
+    if not accepted:
+        return None
+    return max(accepted, key=lambda a: candidates[a].explained)
+
+
 def _nrmse_rows(res: Sequence[np.ndarray], exps: Sequence[Experiment]) -> float:
     return nrmse(np.concatenate(list(res)), np.concatenate([e.y for e in exps]))
 
@@ -546,11 +566,7 @@ def search(
         )
         if not passing:
             break
-        names = {c.effect for c in passing}
-        # marginality: a base before its extension when both pass; otherwise the largest
-        # held-out reduction (the lowest validation gap) wins
-        eligible = [c for c in passing if not (c.extends in names and c.extends not in accepted)]
-        chosen = max(eligible, key=lambda c: c.reduction)
+        chosen = choose(passing, accepted)
         chosen.accepted = True
         chosen.rejected_by = None
         chosen.explained = chosen.reduction
@@ -575,9 +591,7 @@ def search(
             say("the remaining gap is within the noise floor: stopping")
             break
 
-    primary = None
-    if accepted:
-        primary = max(accepted, key=lambda a: candidates[a].explained)
+    primary = primary_effect(accepted, candidates)
     return result(noise_floor=noise_floor, null_gaps=null_gaps, primary=primary)
 
 
