@@ -37,8 +37,13 @@ from jaxvs.diagnosis._thermal import (
     Dynamics,
     SpeedNonlinearity,
 )
-from jaxvs.diagnosis._tmf import MissingMode, ProcessForce, SensorDelay, StableTMF
-from jaxvs.diagnosis._tmf import PositionDependence as TMFPositionDependence
+from jaxvs.diagnosis._tmf import (
+    MissingMode,
+    PositionDependence as TMFPositionDependence,
+    ProcessForce,
+    SensorDelay,
+    StableTMF,
+)
 from jaxvs.twins import DriveTwin
 
 # A drive record at 1 kHz analysed up to 100 Hz, 2 µm encoder, 0.2 m of travel.
@@ -133,9 +138,7 @@ def test_position_dependence_and_external_force_rules():
 
 def test_tmf_effects_admissibility():
     dt = 1e-3
-    ctx = AdmissibilityContext(
-        record_dt=dt, analysis_dt=dt, band_hz=(0.5, 500.0), duration=4.0
-    )
+    ctx = AdmissibilityContext(record_dt=dt, analysis_dt=dt, band_hz=(0.5, 500.0), duration=4.0)
     w = jnp.asarray(2 * math.pi * 220.0)
     assert _verdict(MissingMode(jnp.array([0.1, 0.0]), w, jnp.asarray(0.03), dt), ctx)[0]
     ok, why = _verdict(MissingMode(jnp.array([0.1, 0.0]), w, jnp.asarray(0.6), dt), ctx)
@@ -151,9 +154,7 @@ def test_tmf_effects_admissibility():
     assert not ok and "non-finite" in why
     # position dependence: a slope of the denominator that moves a pole pair across the
     # imaginary axis at one end of the travel is inadmissible
-    tmf = StableTMF.from_rational(
-        jaxvs.RationalTF([1.0, 0.0, 1e6], [1.0, 60.0, 1e6]), 1000.0, dt
-    )
+    tmf = StableTMF.from_rational(jaxvs.RationalTF([1.0, 0.0, 1e6], [1.0, 60.0, 1e6]), 1000.0, dt)
     ctx_tmf = AdmissibilityContext(
         record_dt=dt, analysis_dt=dt, band_hz=(0.5, 500.0), duration=4.0, nominal_model=tmf
     )

@@ -192,7 +192,10 @@ class StribeckFriction(AbstractAdditiveEffect):
         return check(
             (_ok(self.size) and np.isfinite(v_st), "non-finite friction parameters"),
             (fc >= 0, f"negative Coulomb level Fc = {fc:.4g} N"),
-            (fs >= fc, f"static friction below the Coulomb level (Fs = {fs:.4g} < Fc = {fc:.4g} N)"),
+            (
+                fs >= fc,
+                f"static friction below the Coulomb level (Fs = {fs:.4g} < Fc = {fc:.4g} N)",
+            ),
             (
                 v_st > _f(self.vs),
                 f"Stribeck speed {v_st:.3g} m/s below the sharpness of the sign law",

@@ -432,8 +432,7 @@ def search(
             if s.refresh is not None and candidates[s.name].testable:
                 exps = [s.refresh(e, r) for e, r in zip(exps, res_all)]
                 null_sets = [
-                    [s.refresh(e, r) for e, r in zip(ns, nr)]
-                    for ns, nr in zip(null_sets, null_res)
+                    [s.refresh(e, r) for e, r in zip(ns, nr)] for ns, nr in zip(null_sets, null_res)
                 ]
 
         open_specs: list[EffectSpec] = []

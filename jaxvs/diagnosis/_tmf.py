@@ -300,8 +300,6 @@ def _positive(x) -> Positive:
     return Positive(jnp.log(jnp.maximum(x, 1e-12)))
 
 
-
-
 class PositionDependence(AbstractAdditiveEffect):
     """TMF coefficients linear in the other axis' position: `B(σ; y) = B₀(σ) + x·ΔB(σ)`,
     `A(σ; y) = A₀(σ) + x·ΔA(σ)` (monic), `x = (y − ȳ)/h` with `ȳ`, `h` the centre and
