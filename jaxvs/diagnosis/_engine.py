@@ -353,7 +353,8 @@ def search(
     the accepted, a base goes before its extension (marginality), otherwise the largest
     held-out reduction wins. The loop stops when no candidate passes, after
     `max_effects` effects, or when the validation gap is within `stop_at_noise` times
-    the null's noise floor.
+    the null's noise floor. A candidate whose admissible fit made the held-out gap
+    significantly worse in one round is not tried again.
     """
     say = progress or (lambda msg: None)
     rng = np.random.default_rng(seed)
@@ -444,8 +445,14 @@ def search(
             if s.extends is not None and any(specs[a].extends == s.extends for a in accepted):
                 continue  # a sibling extension of the same base is already in
             prev = candidates[s.name]
-            if prev.delta_bic is not None and prev.delta_bic <= 0 and s.extends is None:
-                continue  # no evidence at all in an earlier round: not tried again
+            if (
+                prev.admissible
+                and prev.reduction_interval is not None
+                and prev.reduction_interval[1] < 0
+                and s.extends is None
+            ):
+                continue  # an admissible fit that made the held-out gap significantly worse
+
             open_specs.append(s)
         if not open_specs:
             break
