@@ -329,6 +329,7 @@ def diagnose(
         "candidates": cand_json,
         "verdict": {
             "effects": list(res.accepted),
+            "final_effects": list(res.final.effect_names),
             "primary": primary,
             "validation_gap": g1,
             "calibration_gap": nrmse(np.concatenate(r1[:ncal]), y_cal),

@@ -577,12 +577,11 @@ def search(
         chosen.rejected_by = None
         chosen.explained = chosen.reduction
         if chosen.extends in accepted:
+            # the extension replaced its base in the model; both stay in the order of
+            # addition, and the extension counts the base's reduction as its own
             base = candidates[chosen.extends]
-            chosen.explained += base.explained  # the extension counts as itself
+            chosen.explained += base.explained
             base.explained = 0.0
-            accepted.remove(chosen.extends)
-            base.accepted = False
-            base.rejected_by = f"replaced by its extension {chosen.effect}"
         accepted.append(chosen.effect)
         model = chosen.model
         res_all, ssr, dof0, _, _ = chosen._state  # type: ignore[attr-defined]

@@ -43,6 +43,7 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
+from .. import models
 from ..calibration import fixed, unwrap
 from ..calibration._parametrise import Positive
 from ..data import Record
@@ -86,10 +87,11 @@ class StaticRegression(eqx.Module):
     use_speed: bool = eqx.field(static=True, default=True)
 
     def __call__(self, d: Mapping[str, Array]) -> Float[Array, " n"]:
-        y = self.coef[0] + self.coef[1] * d["T_chassis"]
-        if self.use_speed:
-            y = y + self.coef[2] * d["v_m"]
-        return y
+        # the library's regression (biases folded into the intercept, see above)
+        cols = [d["T_chassis"]] + ([d["v_m"]] if self.use_speed else [])
+        slopes = self.coef[1:]
+        law = models.BiasFreeRegression(slopes, self.coef[0], jnp.zeros_like(slopes))
+        return law(jnp.stack(cols, axis=-1))
 
     def parameters(self) -> dict[str, float]:
         c = np.asarray(self.coef)
