@@ -528,10 +528,14 @@ def _t_position(ctx: Context) -> list[AbstractEffect]:
 
 
 def _t_mode(ctx: Context) -> list[AbstractEffect]:
+    """Starts at the residual's spectral peaks, plus one just below the Nyquist frequency:
+    a mode near Nyquist has no resolved peak in a Welch spectrum but still bends the
+    phase and the gain at the top of the band."""
     dt = ctx.experiments[0].dt
+    freqs = _residual_peaks(ctx, 3) + [0.45 / dt]
     return [
         MissingMode(jnp.zeros(2), jnp.asarray(2 * math.pi * fr), jnp.asarray(0.03), dt)
-        for fr in _residual_peaks(ctx, 3)
+        for fr in freqs
     ]
 
 
