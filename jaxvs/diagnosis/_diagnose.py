@@ -304,6 +304,7 @@ def diagnose(
                 "admissible": c.admissible,
                 "null_p95": c.null_p95,
                 "null_median": c.null_median,
+                "null_threshold": c.null_threshold,
                 "rejected_by": c.rejected_by,
                 "explained": c.explained if c.accepted else None,
                 "accepted": c.accepted,
