@@ -174,9 +174,11 @@ class StribeckFriction(AbstractAdditiveEffect):
     vs: Any  # sharpness [m/s], fixed
 
     def contribution(self, d, nominal):
-        law = models.StribeckFriction(
-            self.size[0], self.size[1], self.v_st / self.vs, velocity_scale=1.0
-        )
+        ratio = self.v_st / self.vs
+        # the library law checks `vs > 0` at run time; a trial step of LM may underflow it
+        # or make it non-finite (that step is then rejected by its cost), so keep it valid
+        ratio = jnp.where(jnp.isfinite(ratio), jnp.maximum(ratio, 1e-12), 1.0)
+        law = models.StribeckFriction(self.size[0], self.size[1], ratio, velocity_scale=1.0)
         return law(d["v"] / self.vs)
 
     def constrained(self):
