@@ -440,9 +440,6 @@ def search(
     dof0 = _dof(model, exps[:n_cal_exp])
     for rnd in range(1, max_effects + 1):
         ssr0 = float(cost[0])
-        e_cal0 = np.concatenate(res_all[:n_cal_exp])
-        n_eff = effective_samples(e_cal0)
-        bic0 = bic_effective(ssr0, n_cal, dof0, n_eff)
         e_val0 = np.concatenate(res_all[n_cal_exp:])
         blen = block_length(e_val0)
         for s in library:
@@ -519,7 +516,13 @@ def search(
             c.shrink = shrink
             c.shrink_interval = s_int
             c.reduction_interval = d_int
-            c.delta_bic = bic0 - bic_effective(ssr1, n_cal, dof_s, n_eff)
+            # effective sample size from the candidate's own residual: under the
+            # alternative it is what is left (noise); the nominal residual is correlated
+            # by the very effect under test, which would discount real evidence
+            n_eff = effective_samples(np.concatenate(r1[:n_cal_exp]))
+            c.delta_bic = bic_effective(ssr0, n_cal, dof0, n_eff) - bic_effective(
+                ssr1, n_cal, dof_s, n_eff
+            )
             eff = next(e for e in m1.effects if e.name == s.name)
             c.parameters = eff.parameters()
             c.admissible, why_not = verdicts[k]
