@@ -10,17 +10,21 @@ Each candidate effect is a differentiable augmentation that is zero at zero size
 
 | effect | augmentation of the predicted force |
 |---|---|
-| `coulomb_friction` | `Fc·tanh(q̇/v_s)` (smooth sign, sharpness `v_s` fixed) |
-| `asymmetric_friction` | `Fc·s + ΔFc·|s| + ΔFv·q̇·s`, `s = tanh(q̇/v_s)`: direction-dependent levels |
-| `stribeck_friction` | `(Fc + Fs·exp(−(q̇/v_st)²))·tanh(q̇/v_s)` |
-| `backlash` | `m_L(q̈_L − q̈) + c_L(q̇_L − q̇)`, load motion `q_L` = play operator of `q` (half gap `b`) |
+| `coulomb_friction` | `jaxvs.models.CoulombFriction`: `Fc·tanh(q̇/v_s)` (sharpness `v_s` fixed) |
+| `asymmetric_friction` | `jaxvs.models.AsymmetricFriction`: levels `Fc+`, `Fc−` and viscous `±ΔFv/2` per direction |
+| `stribeck_friction` | `jaxvs.models.StribeckFriction`: `(Fc + (Fs − Fc)·exp(−(q̇/v_st)²))·tanh(q̇/v_s)` |
+| `backlash` | `m_L(q̈_L − q̈) + c_L(q̇_L − q̇) + F_L(s(q̇_L) − s(q̇))`, `q_L` = play of `q` (half gap `b`): a load with inertia and friction, unloaded while the gap is crossed |
 | `resonance` | `−s²/(s² + 2ζωs + ω²)·(m_r q̈ + c_r q̇)`: a load `m_r` on a spring-damper |
 | `time_delay` | the whole prediction advanced by `τ` (force acting `τ` after it is commanded) |
 | `external_force` | force pulses at events found in the residual (amplitude per event) |
 | `position_dependence` | `Σ c_k P_k(q̄) + A·sin(2πq/p) + B·cos(2πq/p)` (Legendre + ripple of pitch `p`) |
 
 Friction extensions (asymmetric, Stribeck) contain Coulomb friction and replace it when
-they are added after it.
+they are added after it. Every effect states its physical admissibility
+(`admissible(context)`); the family states when a record identifies the rigid axis
+(`identifiability`) and simulates the effect-free null records of the recorded set-up
+(`null_experiments`: the closed loop with the controller identified from the record, or
+the record's motion replayed).
 """
 
 from __future__ import annotations
