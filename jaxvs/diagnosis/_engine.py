@@ -1,20 +1,26 @@
 """Augment and recalibrate: the greedy search for the effects that close the gap.
 
 1. The nominal model is recalibrated on the calibration experiments (Levenberg–Marquardt
-   through `jaxvs.calibrate`), so ordinary parameter error is never taken for a missing
-   effect.
-2. Every testable candidate of the family's library is tried from its starting shapes:
+   through the calibration kernel), so ordinary parameter error is never taken for a
+   missing effect. A record that does not identify it gets no search at all
+   (`family.identifiability`: the reason is reported instead of a verdict).
+2. The null: `family.null_experiments` simulates K effect-free copies of the records
+   from the calibrated model through the recorded set-up; the nominal model refitted on
+   them gives the noise floor (the median of their held-out gaps).
+3. Every testable candidate of the family's library is tried from its starting shapes:
    the parameters it is linear in are set by least squares against the current residual
-   (a score test: the share of the residual the effect's regressors explain is its
-   *signature*), the best shape is kept.
-3. The best candidates by signature are added to the model one at a time and the whole
-   model -- nominal and effect parameters together -- is recalibrated with LM.
-4. A candidate is accepted when, on held-out experiments the calibration never saw, the
-   gap reduction has a moving-block bootstrap interval excluding zero, ΔBIC > 10 on the
-   calibration data, and it removes at least `min_shrink` of the gap. Among the accepted,
-   a simpler effect goes before its own extension (Coulomb before Stribeck, the
-   principle of marginality), otherwise the lowest held-out gap wins. Effects are added
-   greedily until none passes.
+   (the share of the residual this explains is its *signature*), then the whole model --
+   nominal and effect parameters together -- is recalibrated with LM, all starts in one
+   vectorised call. The best **admissible** start by calibration cost is kept
+   (`effect.admissible`); an inadmissible best fit is reported, never accepted.
+4. A candidate passes when, on held-out experiments the calibration never saw, its gap
+   reduction has a moving-block bootstrap interval excluding zero, removes at least
+   `min_shrink` of the gap, has ΔBIC > `min_delta_bic` with an effective sample size,
+   and exceeds what the same candidate, from the same start, gains on the null records
+   (`null_threshold`). Among those that pass, a base goes before its own extension
+   (marginality), otherwise the largest held-out reduction wins. Effects are added
+   greedily until none passes; the primary effect is the one that explains most of the
+   held-out gap.
 
 All experiments of one role are padded to a common length and stacked, so that every
 prediction, Jacobian and calibration is one vectorised call (one compilation per model
