@@ -41,9 +41,11 @@ class DiagnosisReport:
 
     **Fields (JSON):** `family`, `gap` (`metric`, `calibration`, `validation`,
     `noise_floor`), `where` (significant gap-map cells, most concentrated first),
-    `candidates` (best first), `verdict` (`effects` in the order added, `primary`,
-    `validation_gap`, `shrink`, `shrink_interval`, `adequate`), `nominal`, `data`,
-    `rounds`, `timing`. See `to_json()`.
+    `candidates` (best first; each with `admissible`, `reason`, `null_p95`,
+    `null_threshold`, `rejected_by`), `verdict` (`effects` in the order added,
+    `final_effects`, `primary`, `validation_gap`, `shrink`, `shrink_interval`, `adequate`;
+    `None` when the record cannot identify the nominal model), `not_identifiable` (the
+    reason, or `None`), `nominal`, `data`, `rounds`, `timing`. See `to_json()`.
 
     **Fields (Python only):** `nominal_model`, `final_model` (`GapModel`s),
     `calibration`, `validation` (`Experiment`s), `predictions` (per experiment, nominal
