@@ -103,8 +103,8 @@ def _check(args) -> int:
 
 
 def _parse_option(text: str) -> tuple[str, object]:
-    if "=" not in text:
-        raise SystemExit(f"jaxvs diagnose: --option expects KEY=VALUE, got {text!r}")
+    if "=" not in text or not text.split("=", 1)[0].strip():
+        raise ValueError(f"--option expects KEY=VALUE, got {text!r}")
     key, value = text.split("=", 1)
     for cast in (int, float):
         try:
@@ -114,21 +114,29 @@ def _parse_option(text: str) -> tuple[str, object]:
     return key.strip(), value
 
 
+def _user_error(message: str) -> int:
+    """A user error: one line on stderr, exit code 2 (DESIGN.md §3.2)."""
+    print(f"jaxvs: error: {' '.join(str(message).split())}", file=sys.stderr)
+    return 2
+
+
 def _diagnose(args) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)  # calibration in float64 (a program may)
     import pathlib
 
-    options = dict(_parse_option(o) for o in args.option)
+    try:
+        options = dict(_parse_option(o) for o in args.option)
+    except ValueError as err:
+        return _user_error(str(err))
     if args.order is not None:
         options["order"] = args.order
     if args.cutoff_hz is not None:
         options["cutoff_hz"] = args.cutoff_hz
     for f in list(args.data) + list(args.validate or []):
         if not pathlib.Path(f).exists():
-            print(f"jaxvs diagnose: no such file: {f}", file=sys.stderr)
-            return 2
+            return _user_error(f"no such file: {f}")
     try:
         report = jaxvs.diagnose(
             list(args.data),
@@ -141,9 +149,13 @@ def _diagnose(args) -> int:
             **options,
         )
     except (ValueError, TypeError) as err:
-        print(f"jaxvs diagnose: {err}", file=sys.stderr)
-        return 2
+        return _user_error(str(err))
     out = pathlib.Path(args.out)
+    if report.content.get("not_identifiable"):
+        report.save(out)
+        print(f"jaxvs: not identifiable: {report.content['not_identifiable']}", file=sys.stderr)
+        print(f"written: {out / 'report.json'}, {out / 'report.md'}")
+        return 3
     if not args.no_figures:
         from .plotting import plot_diagnosis
 

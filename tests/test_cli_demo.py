@@ -68,6 +68,9 @@ def test_demo_end_to_end(tmp_path, capsys):
     assert diag["family"] == "drive"
     assert set(diag) >= {"gap", "where", "candidates", "verdict"}
     assert diag["gap"]["validation"] >= diag["verdict"]["validation_gap"] >= 0
+    # only the hidden effect is named (the previous engine added a non-causal delay)
+    assert diag["verdict"]["effects"] == ["resonance"]
+    assert diag["verdict"]["primary"] == "resonance"
     assert "Sim-to-real gap diagnosis" in out
 
 

@@ -159,8 +159,11 @@ def test_drive_effect_free_twin_gives_no_effect(tmp_path):
     assert rep["verdict"]["effects"] == []
     assert rep["verdict"]["shrink"] == 0.0
     # the recalibrated nominal model leaves a small gap (force noise, quantisation and the
-    # digital controller), well below that of any hidden effect of the twin (> 2 %)
-    assert 0 < rep["gap"]["noise_floor"] < rep["gap"]["validation"] < 0.015
+    # digital controller), well below that of any hidden effect of the twin (> 2 %); the
+    # null's floor (the nominal model on simulated effect-free records of the same set-up)
+    # is that gap, within the record-to-record spread (30 %)
+    assert 0 < rep["gap"]["noise_floor_white"] < rep["gap"]["validation"] < 0.015
+    assert rep["gap"]["noise_floor"] == pytest.approx(rep["gap"]["validation"], rel=0.3)
     for c in rep["candidates"]:
         assert c["effect"] in DESIGN_EFFECTS["drive"]
         assert set(c) >= {
@@ -203,8 +206,8 @@ def test_bad_input_is_refused(tmp_path):
     with pytest.raises(ValueError, match="holdout"):
         jaxvs.diagnose(rec, family="drive", holdout=1.5)
     still = rec.with_signal("q", np.zeros(len(rec.t)), unit="m")
-    with pytest.raises(ValueError, match="no motion"):
-        jaxvs.diagnose(still, family="drive")
+    rep = jaxvs.diagnose(still, family="drive")
+    assert rep.verdict is None and "no motion" in rep["not_identifiable"]
     assert (
         main(
             ["diagnose", str(tmp_path / "missing.csv"), "--family", "drive", "--out", str(tmp_path)]

@@ -3,11 +3,14 @@ unmodelled effect causes it, and how far the gap shrinks once it is added (DESIG
 """
 
 from ._base import (
+    AbstractAdditiveEffect as AbstractAdditiveEffect,
     AbstractEffect as AbstractEffect,
     AbstractFamily as AbstractFamily,
+    AdmissibilityContext as AdmissibilityContext,
     EffectSpec as EffectSpec,
     Experiment as Experiment,
     GapModel as GapModel,
+    NotIdentifiable as NotIdentifiable,
 )
 from ._check import CheckReport as CheckReport, check as check
 from ._diagnose import FAMILIES as FAMILIES, diagnose as diagnose

@@ -6,7 +6,11 @@
 - `AbstractEffect`: a candidate unmodelled effect as a differentiable augmentation of
   the nominal model. It equals the nominal model when its size is zero. Fields named
   `size` hold the parameters the augmentation is linear in; everything else is a shape
-  parameter (a frequency, a delay, a gap) searched on a grid and then calibrated.
+  parameter (a frequency, a delay, a gap) searched on a grid and then calibrated. Every
+  effect says whether its calibrated values are physically admissible
+  (`admissible(context)`); an inadmissible fit is reported, never accepted.
+- `AdmissibilityContext`: what the admissibility rules compare against (the record's
+  sample time and position resolution, the analysed band, the nominal parameters).
 - `EffectSpec`: the library entry of one effect -- its exact name (DESIGN.md §3.2), the
   signals it needs, the effect it extends (a Stribeck law contains Coulomb friction), and
   how to draw its starting points from the nominal residual.
@@ -31,7 +35,21 @@ from jaxtyping import Array, Float
 from ..calibration import unwrap
 from ..data import Record
 
-__all__ = ["AbstractEffect", "AbstractFamily", "EffectSpec", "Experiment", "GapModel"]
+__all__ = [
+    "AbstractEffect",
+    "AbstractFamily",
+    "AdmissibilityContext",
+    "EffectSpec",
+    "Experiment",
+    "GapModel",
+    "NotIdentifiable",
+]
+
+
+class NotIdentifiable(Exception):
+    """The record cannot identify the family's nominal model (no excitation, one
+    direction only, too short, ...); the diagnosis answers with the reason instead of a
+    verdict (DESIGN.md §3.2: `"verdict": null`, `"not_identifiable": reason`, exit 3)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,6 +75,8 @@ class Experiment:
     noise_var: float
     signals: frozenset[str]
     source: Record | None = None
+    record_dt: float = 0.0  # sample time of the original record [s]
+    resolution: float = 0.0  # quantisation step of the measured input (position) [unit]
 
     @property
     def y(self) -> np.ndarray:
@@ -89,46 +109,99 @@ class Experiment:
         )
 
 
+@dataclasses.dataclass(frozen=True)
+class AdmissibilityContext:
+    """What the admissibility rules of the effects compare their parameters against.
+
+    - `record_dt`: sample time of the original record [s] (a causal delay lasts at least
+        one sample).
+    - `analysis_dt`: sample time of the analysis arrays [s].
+    - `band_hz`: `(low, high)` the analysed frequency band [Hz]: the lowest frequency the
+        records resolve (two periods in the shortest experiment) and the upper edge of
+        the preprocessing (drive: the low-pass cut-off; others: 0.45 of the sampling rate).
+    - `resolution`: quantisation step of the measured position [m] (0 when unquantised).
+    - `duration`: length of the shortest experiment [s].
+    - `span`: travel of the measured position over all experiments [m] (drive).
+    - `nominal`: the calibrated nominal parameters (e.g. `M`, `Fv` of the drive).
+    - `nominal_model`: the calibrated nominal model (e.g. the TMF whose poles an effect
+        moves).
+    """
+
+    record_dt: float
+    analysis_dt: float
+    band_hz: tuple[float, float]
+    resolution: float = 0.0
+    duration: float = float("inf")
+    span: float = float("inf")
+    nominal: Mapping[str, float] = dataclasses.field(default_factory=dict)
+    nominal_model: Any = None  # the calibrated nominal model itself (e.g. a TMF)
+
+
+Admissible = tuple[bool, str | None]
+"""`(True, None)`, or `(False, reason)` with the rule that failed, in words."""
+
+
+def check(*rules: tuple[bool, str]) -> Admissible:
+    """The first failing rule's reason: `check((ok1, "why1"), (ok2, "why2"))`; non-finite
+    values fail every comparison, so a NaN parameter is inadmissible."""
+    for ok, reason in rules:
+        if not bool(ok):
+            return False, reason
+    return True, None
+
+
 class AbstractEffect(eqx.Module):
     """A candidate effect: an augmentation of the nominal model, nominal at zero size.
 
-    Additive effects implement `contribution(arrays, nominal)`; effects that transform
-    the whole prediction (a delay, a thermal lag) override `apply`.
+    Concrete effects are final classes that define `name` and `order` (class variables),
+    `apply` (the augmented prediction), `parameters` (physical values, for the report)
+    and `admissible` (the physics rules of the effect). Additive effects derive from
+    [`AbstractAdditiveEffect`][] and define `contribution` instead of `apply`.
+
+    `order` sets the composition: additive terms (0) before transforms of the whole
+    prediction (1) and disturbance estimates (2).
     """
 
-    name: ClassVar[str]
+    name: eqx.AbstractClassVar[str]
+    order: eqx.AbstractClassVar[int]
 
-    def contribution(self, arrays: Mapping[str, Array], nominal: Any) -> Float[Array, " n"]:
-        raise NotImplementedError
-
+    @abc.abstractmethod
     def apply(
         self, y: Float[Array, " n"], arrays: Mapping[str, Array], nominal: Any
     ) -> Float[Array, " n"]:
-        return y + self.contribution(arrays, nominal)
+        """The prediction `y` of the model without this effect, augmented by it."""
 
     @abc.abstractmethod
     def parameters(self) -> dict[str, float]:
         """The physical parameters of the effect, by name (with units in the name)."""
 
-    def physical(self) -> bool:
-        """Whether the calibrated values are physically admissible (e.g. a non-negative
-        mass); an inadmissible fit is never accepted."""
-        return True
+    @abc.abstractmethod
+    def admissible(self, context: AdmissibilityContext) -> Admissible:
+        """Whether the calibrated values are physically admissible, with the reason when
+        not (a non-causal delay, a gap below the position resolution, an overdamped
+        "resonance", negative friction, a negative mass ...). Concrete values only (run
+        outside `jit`, on a calibrated effect)."""
 
-    def order(self) -> int:
-        """Effects are applied in increasing order: additive terms (0) before transforms
-        of the whole prediction (1) and disturbance estimates (2)."""
-        return 0
-
+    @abc.abstractmethod
     def constrained(self) -> AbstractEffect:
         """This effect with its constrained leaves reparametrised for calibration
         (`jaxvs.calibration.positive`, `fixed`); `unwrap` gives it back."""
-        return self
 
+    @abc.abstractmethod
     def extra_dof(self, arrays: Sequence[Mapping[str, Array]]) -> int:
-        """Degrees of freedom beyond the calibrated leaves (for ΔBIC), e.g. event
-        locations found in the data."""
-        return 0
+        """Degrees of freedom beyond the calibrated leaves (for the information
+        criterion), e.g. event locations found in the data; 0 for most effects."""
+
+
+class AbstractAdditiveEffect(AbstractEffect):
+    """An effect that adds a term to the prediction: `y + contribution(arrays, nominal)`."""
+
+    @abc.abstractmethod
+    def contribution(self, arrays: Mapping[str, Array], nominal: Any) -> Float[Array, " n"]:
+        """The term the effect adds to the prediction (zero at zero size)."""
+
+    def apply(self, y, arrays, nominal):
+        return y + self.contribution(arrays, nominal)
 
 
 class GapModel(eqx.Module):
@@ -144,7 +217,7 @@ class GapModel(eqx.Module):
 
     def __call__(self, arrays: Mapping[str, Array]) -> Float[Array, " n"]:
         y = self.nominal(arrays)
-        for effect in sorted(self.effects, key=lambda e: e.order()):
+        for effect in sorted(self.effects, key=lambda e: e.order):
             y = effect.apply(y, arrays, self.nominal)
         return y
 
@@ -218,15 +291,29 @@ class EffectSpec:
 
 
 class AbstractFamily(abc.ABC):
-    """A model family of the diagnosis (`drive`, `tmf`, `thermal`)."""
+    """A model family of the diagnosis (`drive`, `tmf`, `thermal`).
+
+    Besides preprocessing, the nominal model and the library, a family says whether a
+    record identifies its nominal model (`identifiability`), what the admissibility rules
+    of its effects compare against (`admissibility_context`), and how effect-free records
+    of the same set-up are simulated (`null_experiments`, the null every candidate must
+    beat). Options are validated against `option_keys`.
+    """
 
     name: ClassVar[str]
     required: ClassVar[tuple[str, ...]]
     optional: ClassVar[tuple[str, ...]]
+    option_keys: ClassVar[tuple[str, ...]]
     metric: ClassVar[str] = "nrmse"
     target_label: ClassVar[str] = "target"
 
     def __init__(self, **options: Any):
+        unknown = sorted(set(options) - set(self.option_keys))
+        if unknown:
+            raise ValueError(
+                f"diagnose(family={self.name!r}): unknown option(s) {unknown}; the "
+                f"{self.name} family takes {list(self.option_keys)}."
+            )
         self.options = dict(options)
 
     @abc.abstractmethod
@@ -240,6 +327,30 @@ class AbstractFamily(abc.ABC):
     @abc.abstractmethod
     def library(self) -> list[EffectSpec]:
         """The candidate effects of this family, in DESIGN.md's order."""
+
+    @abc.abstractmethod
+    def identifiability(self, experiments: Sequence[Experiment], model: GapModel) -> str | None:
+        """`None` when the calibration experiments identify the calibrated nominal model
+        `model`, else the reason in words (e.g. "the force never reverses: motion in one
+        direction only")."""
+
+    @abc.abstractmethod
+    def admissibility_context(
+        self, experiments: Sequence[Experiment], model: GapModel
+    ) -> AdmissibilityContext:
+        """What the effects' admissibility rules compare against, for these experiments."""
+
+    @abc.abstractmethod
+    def null_experiments(
+        self,
+        model: GapModel,
+        experiments: Sequence[Experiment],
+        rng: np.random.Generator,
+        count: int,
+    ) -> list[list[Experiment]]:
+        """`count` effect-free copies of `experiments`: the calibrated model `model`
+        simulated through each record's own set-up (sampling, quantisation, noise level,
+        loop and preprocessing). Returns `count` lists, each like `experiments`."""
 
     def nominal_parameters(self, model: GapModel) -> dict[str, float]:
         nom = unwrap(model.nominal)

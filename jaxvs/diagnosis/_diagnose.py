@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..data import Record, load, split_blocks
-from ._base import AbstractFamily
+from ._base import AbstractFamily, NotIdentifiable
 from ._drive import DriveFamily
 from ._engine import search
 from ._gapmap import gap_map
@@ -66,6 +66,51 @@ def _check_signals(fam: AbstractFamily, recs: list[tuple[Record, str]]) -> None:
             )
 
 
+def _check_int(name: str, value: Any, minimum: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise ValueError(f"diagnose: {name} must be an integer >= {minimum}; got {value!r}.")
+
+
+def _check_sampling(recs: list[tuple[Record, str]]) -> None:
+    """All experiments must share one sampling rate: the analysis filters, the delays and
+    the null are built for one sample time; a record at another rate would show its
+    resampling as an effect."""
+    dts = [(float(r.dt), n) for r, n in recs]
+    dt0, n0 = dts[0]
+    for dt, n in dts[1:]:
+        if abs(dt - dt0) > 1e-6 * dt0:
+            raise ValueError(
+                f"diagnose: experiment {n!r} is sampled at {1 / dt:g} Hz, {n0!r} at "
+                f"{1 / dt0:g} Hz; all experiments must share one sampling rate. Resample "
+                "them to a common rate first and say so in your report."
+            )
+
+
+def _not_identifiable_report(fam, why, cal_recs, val_recs, how, t_start, res=None):
+    """The report of a record that cannot identify the nominal model: no verdict."""
+    names = ", ".join(n for _, n in cal_recs)
+    content = {
+        "family": fam.name,
+        "gap": None,
+        "where": [],
+        "candidates": [],
+        "verdict": None,
+        "not_identifiable": f"{why} (calibration records: {names})",
+        "nominal": {
+            "model": fam.describe_nominal(),
+            "parameters": fam.nominal_parameters(res.nominal) if res is not None else {},
+        },
+        "data": {
+            "calibration": [{"name": n, "samples": len(r)} for r, n in cal_recs],
+            "validation": [{"name": n, "samples": len(r)} for r, n in val_recs],
+            "holdout": how,
+        },
+        "rounds": [],
+        "timing": {"seconds": time.perf_counter() - t_start},
+    }
+    return DiagnosisReport(content)
+
+
 def diagnose(
     calibration: Any,
     validation: Any = None,
@@ -77,6 +122,7 @@ def diagnose(
     min_delta_bic: float = 10.0,
     fdr: float = 0.05,
     n_boot: int = 300,
+    n_null: int = 19,
     seed: int = 0,
     progress: bool = False,
     **options: Any,
@@ -87,7 +133,14 @@ def diagnose(
     lies (time windows, frequency bands, operating points; block-bootstrap significance
     with false-discovery control), then adds candidate effects from the family's library
     greedily with Levenberg–Marquardt recalibration, accepting one only when the held-out
-    gap reduction has a bootstrap interval excluding zero and ΔBIC > `min_delta_bic`.
+    gap reduction has a bootstrap interval excluding zero, its best fit is physically
+    admissible, ΔBIC (with the residual's effective sample size) exceeds
+    `min_delta_bic`, and the held-out gain exceeds the 95th percentile of what the same
+    candidate gains on `n_null` effect-free records simulated from the calibrated
+    nominal model through the recorded set-up (the null). Among the accepted, the
+    largest held-out reduction wins (a base before its extension). A record that cannot
+    identify the nominal model gets no verdict: `report["verdict"]` is `None` and
+    `report["not_identifiable"]` says why.
 
     **Arguments:**
 
@@ -105,6 +158,8 @@ def diagnose(
     - `min_delta_bic`: ΔBIC threshold (default 10, "very strong" evidence).
     - `fdr`: false discovery rate of the gap map (default 0.05).
     - `n_boot`: bootstrap resamples (default 300).
+    - `n_null`: effect-free records simulated for the null (default 19: the 95th
+        percentile is then about the largest of them).
     - `seed`: seed of the bootstrap and the gap-map permutations.
     - `progress`: print progress to stderr.
     - `**options`: family options (drive: `cutoff_hz`, `decimation`,
@@ -120,6 +175,15 @@ def diagnose(
         raise ValueError(f"diagnose: unknown family {family!r}; choose one of {sorted(FAMILIES)}.")
     if not 0 < holdout < 1:
         raise ValueError(f"diagnose: holdout must lie in (0, 1); got {holdout}.")
+    _check_int("max_effects", max_effects, 1)
+    _check_int("n_boot", n_boot, 50)
+    _check_int("n_null", n_null, 4)
+    if not (isinstance(min_shrink, int | float) and 0 <= min_shrink < 1):
+        raise ValueError(f"diagnose: min_shrink must lie in [0, 1); got {min_shrink!r}.")
+    if not (isinstance(min_delta_bic, int | float) and np.isfinite(min_delta_bic)):
+        raise ValueError(f"diagnose: min_delta_bic must be a finite number; got {min_delta_bic!r}.")
+    if not (isinstance(fdr, int | float) and 0 < fdr < 1):
+        raise ValueError(f"diagnose: fdr must lie in (0, 1); got {fdr!r}.")
 
     def say(msg: str) -> None:
         if progress:
@@ -129,6 +193,7 @@ def diagnose(
     cal_recs = _records(calibration, "calibration")
     val_recs = _records(validation, "validation")
     _check_signals(fam, cal_recs + val_recs)
+    _check_sampling(cal_recs + val_recs)
     if not val_recs:
         if len(cal_recs) >= 2:
             k = max(1, int(round(holdout * len(cal_recs))))
@@ -146,8 +211,11 @@ def diagnose(
     else:
         how = "validation experiments given"
     say(f"preparing {len(cal_recs)} calibration and {len(val_recs)} validation experiment(s)")
-    cal = [fam.prepare(r, n) for r, n in cal_recs]
-    val = [fam.prepare(r, n) for r, n in val_recs]
+    try:
+        cal = [fam.prepare(r, n) for r, n in cal_recs]
+        val = [fam.prepare(r, n) for r, n in val_recs]
+    except NotIdentifiable as err:
+        return _not_identifiable_report(fam, str(err), cal_recs, val_recs, how, t_start)
 
     res = search(
         fam,
@@ -157,9 +225,14 @@ def diagnose(
         min_shrink=min_shrink,
         min_delta_bic=min_delta_bic,
         n_boot=n_boot,
+        n_null=n_null,
         seed=seed,
         progress=say,
     )
+    if res.not_identifiable is not None:
+        return _not_identifiable_report(
+            fam, res.not_identifiable, cal_recs, val_recs, how, t_start, res
+        )
     say("mapping the gap")
     exps = res.calibration + res.validation
     ncal = len(res.calibration)
@@ -168,7 +241,8 @@ def diagnose(
     y_val = np.concatenate([e.y for e in res.validation])
     gap_cal = nrmse(np.concatenate(r0[:ncal]), y_cal)
     gap_val = nrmse(np.concatenate(r0[ncal:]), y_val)
-    noise = math.sqrt(sum(e.noise_var * e.n for e in res.validation) / float(np.sum(y_val**2)))
+    noise = res.noise_floor
+    white = math.sqrt(sum(e.noise_var * e.n for e in res.validation) / float(np.sum(y_val**2)))
 
     cells = gap_map(exps, r0, q=fdr, seed=seed)
     cells_after = {c.label: c for c in gap_map(exps, r1, q=fdr, seed=seed)}
@@ -209,17 +283,12 @@ def diagnose(
     order = {n: i for i, n in enumerate(res.accepted)}
     cands.sort(
         key=lambda c: (
-            0 if c.effect in order else (1 if c.testable else 2),
+            0 if c.effect in order else (1 if c.testable and c.round else 2),
             order.get(c.effect, 0),
-            -(c.delta_bic if c.delta_bic is not None else -np.inf),
+            -c.reduction,
         )
     )
-    primary = None
-    if res.accepted:
-        primary = res.accepted[0]
-        for a in res.accepted[1:]:
-            if res.candidates[a].extends == primary:
-                primary = a
+    primary = res.primary
     cand_json = []
     for c in cands:
         cand_json.append(
@@ -237,6 +306,12 @@ def diagnose(
                 "shrink_interval": list(c.shrink_interval) if c.shrink_interval else None,
                 "reduction_interval": list(c.reduction_interval) if c.reduction_interval else None,
                 "delta_bic": c.delta_bic,
+                "admissible": c.admissible,
+                "null_p95": c.null_p95,
+                "null_median": c.null_median,
+                "null_threshold": c.null_threshold,
+                "rejected_by": c.rejected_by,
+                "explained": c.explained if c.accepted else None,
                 "accepted": c.accepted,
                 "extends": c.extends,
                 "parameters": c.parameters,
@@ -250,13 +325,17 @@ def diagnose(
             "calibration": gap_cal,
             "validation": gap_val,
             "noise_floor": noise,
+            "noise_floor_white": white,
+            "null_gaps": list(res.null_gaps),
             "target": fam.target_label,
         },
+        "not_identifiable": None,
         "where": where,
         "where_after": where_after,
         "candidates": cand_json,
         "verdict": {
             "effects": list(res.accepted),
+            "final_effects": list(res.final.effect_names),
             "primary": primary,
             "validation_gap": g1,
             "calibration_gap": nrmse(np.concatenate(r1[:ncal]), y_cal),

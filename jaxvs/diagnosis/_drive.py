@@ -10,17 +10,21 @@ Each candidate effect is a differentiable augmentation that is zero at zero size
 
 | effect | augmentation of the predicted force |
 |---|---|
-| `coulomb_friction` | `Fc·tanh(q̇/v_s)` (smooth sign, sharpness `v_s` fixed) |
-| `asymmetric_friction` | `Fc·s + ΔFc·|s| + ΔFv·q̇·s`, `s = tanh(q̇/v_s)`: direction-dependent levels |
-| `stribeck_friction` | `(Fc + Fs·exp(−(q̇/v_st)²))·tanh(q̇/v_s)` |
-| `backlash` | `m_L(q̈_L − q̈) + c_L(q̇_L − q̇)`, load motion `q_L` = play operator of `q` (half gap `b`) |
+| `coulomb_friction` | `jaxvs.models.CoulombFriction`: `Fc·tanh(q̇/v_s)` (sharpness `v_s` fixed) |
+| `asymmetric_friction` | `jaxvs.models.AsymmetricFriction`: levels `Fc+`, `Fc−` and viscous `±ΔFv/2` per direction |
+| `stribeck_friction` | `jaxvs.models.StribeckFriction`: `(Fc + (Fs − Fc)·exp(−(q̇/v_st)²))·tanh(q̇/v_s)` |
+| `backlash` | `m_L(q̈_L − q̈) + c_L(q̇_L − q̇) + F_L(s(q̇_L) − s(q̇))`, `q_L` = play of `q` (half gap `b`): a load with inertia and friction, unloaded while the gap is crossed |
 | `resonance` | `−s²/(s² + 2ζωs + ω²)·(m_r q̈ + c_r q̇)`: a load `m_r` on a spring-damper |
 | `time_delay` | the whole prediction advanced by `τ` (force acting `τ` after it is commanded) |
 | `external_force` | force pulses at events found in the residual (amplitude per event) |
 | `position_dependence` | `Σ c_k P_k(q̄) + A·sin(2πq/p) + B·cos(2πq/p)` (Legendre + ripple of pitch `p`) |
 
 Friction extensions (asymmetric, Stribeck) contain Coulomb friction and replace it when
-they are added after it.
+they are added after it. Every effect states its physical admissibility
+(`admissible(context)`); the family states when a record identifies the rigid axis
+(`identifiability`) and simulates the effect-free null records of the recorded set-up
+(`null_experiments`: the closed loop with the controller identified from the record, or
+the record's motion replayed).
 """
 
 from __future__ import annotations
@@ -37,10 +41,27 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
-from ..calibration import fixed, positive
+from .. import models
+from ..calibration import fixed, positive, unwrap
 from ..data import Record
-from ._base import AbstractEffect, AbstractFamily, Context, EffectSpec, Experiment
-from ._stats import white_noise_floor
+from ._base import (
+    AbstractAdditiveEffect,
+    AbstractEffect,
+    AbstractFamily,
+    AdmissibilityContext,
+    Context,
+    EffectSpec,
+    Experiment,
+    GapModel,
+    NotIdentifiable,
+    check,
+)
+from ._stats import (
+    difference_noise_sigma,
+    effective_samples,
+    quantisation_step,
+    white_noise_floor,
+)
 
 __all__ = ["DriveFamily", "RigidAxis"]
 
@@ -57,7 +78,8 @@ class RigidAxis(eqx.Module):
     offset: Float[Array, ""]
 
     def __call__(self, d: Mapping[str, Array]) -> Array:
-        return self.M * d["a"] + self.Fv * d["v"] + self.offset
+        # inverse dynamics of the library's rigid axis with viscous friction and offset
+        return self.M * d["a"] + models.ViscousFriction(self.Fv)(d["v"]) + self.offset
 
     def parameters(self) -> dict[str, float]:
         return {"M": _f(self.M), "Fv": _f(self.Fv), "offset": _f(self.offset)}
@@ -71,61 +93,124 @@ def _pos(x):
     return positive(jnp.maximum(jnp.asarray(x), 1e-12))
 
 
-def _smooth_sign(v: Array, vs: Array) -> Array:
-    return jnp.tanh(v / vs)
+def _ok(x) -> bool:
+    return bool(np.all(np.isfinite(np.asarray(x))))
 
 
-class CoulombFriction(AbstractEffect):
+class CoulombFriction(AbstractAdditiveEffect):
+    """Dry friction of constant level, the library's `jaxvs.models.CoulombFriction`
+    (`Fc·tanh(q̇/v_s)`, sharpness `v_s` fixed)."""
+
     name: ClassVar[str] = "coulomb_friction"
-    size: Float[Array, 1]
-    vs: Any  # fixed sharpness [m/s]
+    order: ClassVar[int] = 0
+    size: Float[Array, 1]  # Fc [N]
+    vs: Any  # sharpness [m/s], fixed
 
     def contribution(self, d, nominal):
-        return self.size[0] * _smooth_sign(d["v"], self.vs)
+        # the library law on the velocity in units of the sharpness (`v/v_s`, sharpness 1):
+        # `v_s` stays an array, so starts of several sharpnesses share one structure
+        return models.CoulombFriction(self.size[0], velocity_scale=1.0)(d["v"] / self.vs)
 
     def constrained(self):
         return eqx.tree_at(lambda e: e.vs, self, replace_fn=fixed)
+
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        fc = _f(self.size[0])
+        return check((np.isfinite(fc) and fc >= 0, f"negative Coulomb friction Fc = {fc:.4g} N"))
 
     def parameters(self):
         return {"Fc": _f(self.size[0]), "v_s": _f(self.vs)}
 
 
-class AsymmetricFriction(AbstractEffect):
+class AsymmetricFriction(AbstractAdditiveEffect):
+    """Direction-dependent Coulomb and viscous friction, the library's
+    `jaxvs.models.AsymmetricFriction` (Janot et al. 2019, eq. 12) with levels `Fc+`,
+    `Fc−` and viscous coefficients `±ΔFv/2` on top of the nominal `Fv`."""
+
     name: ClassVar[str] = "asymmetric_friction"
-    size: Float[Array, 3]  # Fc, ΔFc, ΔFv
-    vs: Any
+    order: ClassVar[int] = 0
+    size: Float[Array, 3]  # Fc+ [N], Fc− [N], ΔFv [N·s/m]
+    vs: Any  # sharpness [m/s], fixed
 
     def contribution(self, d, nominal):
-        s = _smooth_sign(d["v"], self.vs)
-        fc, dfc, dfv = self.size[0], self.size[1], self.size[2]
-        return fc * s + dfc * jnp.abs(s) + dfv * d["v"] * s
+        fp, fn, dfv = self.size[0], self.size[1], self.size[2]
+        h = 0.5 * dfv * self.vs  # viscous coefficients per unit of v/v_s
+        law = models.AsymmetricFriction(fp, h, fn, -h, velocity_scale=1.0)
+        return law(d["v"] / self.vs)
 
     def constrained(self):
         return eqx.tree_at(lambda e: e.vs, self, replace_fn=fixed)
 
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        fp, fn, dfv = (float(x) for x in np.asarray(self.size))
+        fv = float(context.nominal.get("Fv", 0.0))
+        return check(
+            (_ok(self.size), "non-finite friction parameters"),
+            (fp >= 0, f"negative friction level in the positive direction, Fc+ = {fp:.4g} N"),
+            (fn >= 0, f"negative friction level in the negative direction, Fc− = {fn:.4g} N"),
+            (
+                fv - 0.5 * abs(dfv) >= 0,
+                f"negative viscous friction in one direction (Fv = {fv:.4g}, ΔFv = {dfv:.4g} "
+                "N·s/m)",
+            ),
+        )
+
     def parameters(self):
-        fc, dfc, dfv = (float(x) for x in np.asarray(self.size))
-        return {"Fc_pos": fc + dfc, "Fc_neg": fc - dfc, "dFv": dfv, "v_s": _f(self.vs)}
+        fp, fn, dfv = (float(x) for x in np.asarray(self.size))
+        return {"Fc_pos": fp, "Fc_neg": fn, "dFv": dfv, "v_s": _f(self.vs)}
 
 
-class StribeckFriction(AbstractEffect):
+class StribeckFriction(AbstractAdditiveEffect):
+    """Friction falling from a static level `Fs` to the Coulomb level `Fc` over the
+    Stribeck speed, the library's `jaxvs.models.StribeckFriction` (Armstrong-Hélouvry
+    et al. 1994, eq. 5)."""
+
     name: ClassVar[str] = "stribeck_friction"
-    size: Float[Array, 2]  # Fc, Fs (excess static friction)
-    v_st: Any  # positive, calibrated
-    vs: Any
+    order: ClassVar[int] = 0
+    size: Float[Array, 2]  # Fc, Fs [N]
+    v_st: Any  # Stribeck speed [m/s], positive, calibrated
+    vs: Any  # sharpness [m/s], fixed
 
     def contribution(self, d, nominal):
-        v = d["v"]
-        level = self.size[0] + self.size[1] * jnp.exp(-jnp.square(v / self.v_st))
-        return level * _smooth_sign(v, self.vs)
+        ratio = self.v_st / self.vs
+        # the library law checks `vs > 0` at run time; a trial step of LM may underflow it
+        # or make it non-finite (that step is then rejected by its cost), so keep it valid
+        ratio = jnp.where(jnp.isfinite(ratio), jnp.maximum(ratio, 1e-12), 1.0)
+        law = models.StribeckFriction(self.size[0], self.size[1], ratio, velocity_scale=1.0)
+        return law(d["v"] / self.vs)
 
     def constrained(self):
         e = eqx.tree_at(lambda e: e.vs, self, replace_fn=fixed)
         return eqx.tree_at(lambda e: e.v_st, e, replace_fn=_pos)
 
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        fc, fs = (float(x) for x in np.asarray(self.size))
+        v_st = _f(self.v_st)
+        return check(
+            (_ok(self.size) and np.isfinite(v_st), "non-finite friction parameters"),
+            (fc >= 0, f"negative Coulomb level Fc = {fc:.4g} N"),
+            (
+                fs >= fc,
+                f"static friction below the Coulomb level (Fs = {fs:.4g} < Fc = {fc:.4g} N)",
+            ),
+            (
+                v_st > _f(self.vs),
+                f"Stribeck speed {v_st:.3g} m/s below the sharpness of the sign law",
+            ),
+        )
+
     def parameters(self):
         fc, fs = (float(x) for x in np.asarray(self.size))
-        return {"Fc": fc, "Fs": fc + fs, "v_stribeck": _f(self.v_st), "v_s": _f(self.vs)}
+        return {"Fc": fc, "Fs": fs, "v_stribeck": _f(self.v_st), "v_s": _f(self.vs)}
 
 
 def _play(q: Array, b: Array) -> Array:
@@ -139,10 +224,22 @@ def _play(q: Array, b: Array) -> Array:
     return out
 
 
-class Backlash(AbstractEffect):
+class Backlash(AbstractAdditiveEffect):
+    """Play of total width `2b` between the motor and a load `m_L` carried by friction.
+
+    The load follows the motor through the play operator, `q_L = play(q, b)`; while the
+    motor crosses the gap after a reversal it moves unloaded, so the load's inertia,
+    viscous and dry friction act with the load's motion, not the motor's:
+    `m_L (q̈_L − q̈) + c_L (q̇_L − q̇) + F_L (s(q̇_L) − s(q̇))`, `s` the smooth sign. A
+    load held by table friction (`F_L > 0`, a ball screw with its table) makes the force
+    drop by `F_L` during the crossing; a free inertial load (`F_L = 0`) makes the
+    re-engagement impact."""
+
     name: ClassVar[str] = "backlash"
-    size: Float[Array, 2]  # load mass m_L [kg], load damping c_L [N·s/m]
+    order: ClassVar[int] = 0
+    size: Float[Array, 3]  # m_L [kg], c_L [N·s/m], F_L [N]
     b: Any  # half gap [m], positive
+    vs: Any  # sharpness of the load's sign law [m/s], fixed
     dt: float = eqx.field(static=True)
 
     def contribution(self, d, nominal):
@@ -151,17 +248,40 @@ class Backlash(AbstractEffect):
         al = jnp.gradient(vl, self.dt)
         # the contact spring of a real axis smooths the re-engagement over a few samples
         kernel = jnp.array([0.25, 0.5, 0.25])
+        vl = jnp.convolve(vl, kernel, mode="same")
         al = jnp.convolve(al, kernel, mode="same")
-        return self.size[0] * (al - d["a"]) + self.size[1] * (vl - d["v"])
+        dry = jnp.tanh(vl / self.vs) - jnp.tanh(d["v"] / self.vs)
+        return self.size[0] * (al - d["a"]) + self.size[1] * (vl - d["v"]) + self.size[2] * dry
 
     def constrained(self):
-        return eqx.tree_at(lambda e: e.b, self, replace_fn=_pos)
+        e = eqx.tree_at(lambda e: e.vs, self, replace_fn=fixed)
+        return eqx.tree_at(lambda e: e.b, e, replace_fn=_pos)
 
-    def physical(self) -> bool:
-        return bool(np.all(np.asarray(self.size) >= 0))
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        m, c, fl = (float(x) for x in np.asarray(self.size))
+        gap = 2 * _f(self.b)
+        res = context.resolution
+        mass = float(context.nominal.get("M", np.inf))
+        return check(
+            (_ok(self.size) and np.isfinite(gap), "non-finite backlash parameters"),
+            (
+                gap > max(res, 0.0) and gap > 0,
+                f"gap {gap:.3g} m not above the position resolution {res:.3g} m",
+            ),
+            (gap < 0.1 * context.span, f"gap {gap:.3g} m not small against the travel"),
+            (m >= 0, f"negative load mass m_L = {m:.4g} kg"),
+            (m <= mass, f"load mass m_L = {m:.4g} kg above the whole moving mass {mass:.4g} kg"),
+            (c >= 0, f"negative load damping c_L = {c:.4g} N·s/m"),
+            (fl >= 0, f"negative load friction F_L = {fl:.4g} N"),
+            (m > 0 or fl > 0, "neither a load mass nor a load friction behind the gap"),
+        )
 
     def parameters(self):
-        return {"gap": 2 * _f(self.b), "m_load": _f(self.size[0]), "c_load": _f(self.size[1])}
+        m, c, fl = (float(x) for x in np.asarray(self.size))
+        return {"gap": 2 * _f(self.b), "m_load": m, "c_load": c, "F_load": fl}
 
 
 def _highpass2(x: Array, w: Array, z: Array, dt: float) -> Array:
@@ -183,13 +303,14 @@ def _highpass2(x: Array, w: Array, z: Array, dt: float) -> Array:
     return jax.lax.scan(step, init, x)[1]
 
 
-class Resonance(AbstractEffect):
+class Resonance(AbstractAdditiveEffect):
     """A load `m_r` on a spring-damper behind the motor (mode `ω`, `ζ`), with its own
     viscous friction `c_r`: the load's acceleration and velocity are those of the motor
     filtered by `H(s) = (2ζωs + ω²)/(s² + 2ζωs + ω²)`, so the force changes by
     `m_r (H − 1) q̈ + c_r (H − 1) q̇`, with `H − 1 = −s²/(s² + 2ζωs + ω²)`."""
 
     name: ClassVar[str] = "resonance"
+    order: ClassVar[int] = 0
     size: Float[Array, 2]  # resonating mass m_r [kg], its viscous friction c_r [N·s/m]
     omega: Any  # positive [rad/s]
     zeta: Any  # positive
@@ -202,8 +323,24 @@ class Resonance(AbstractEffect):
     def constrained(self):
         return eqx.tree_at(lambda e: (e.omega, e.zeta), self, replace_fn=_pos)
 
-    def physical(self) -> bool:
-        return bool(np.asarray(self.size)[0] >= 0 and np.asarray(self.zeta) < 2.0)
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        m = float(np.asarray(self.size)[0])
+        f = _f(self.omega) / (2 * math.pi)
+        z = _f(self.zeta)
+        lo, hi = context.band_hz
+        mass = float(context.nominal.get("M", np.inf))
+        return check(
+            (_ok(self.size) and np.isfinite(f) and np.isfinite(z), "non-finite parameters"),
+            (z < ZETA_MAX, f"damping ratio ζ = {z:.3g}: not a lightly damped mode (< {ZETA_MAX})"),
+            (lo <= f <= hi, f"f = {f:.4g} Hz outside the analysed band [{lo:.3g}, {hi:.4g}] Hz"),
+            (m > 0, f"non-positive resonating mass m_r = {m:.4g} kg"),
+            (m <= mass, f"resonating mass m_r = {m:.4g} kg above the whole mass {mass:.4g} kg"),
+            # c_r is not ruled: at low frequency its term is a mass-like correction that
+            # trades with the nominal M and Fv, so its sign is not a friction's
+        )
 
     def parameters(self):
         return {
@@ -214,8 +351,16 @@ class Resonance(AbstractEffect):
         }
 
 
+ZETA_MAX = 0.3
+"""Largest damping ratio of a mode the diagnosis calls a resonance (heuristic: above
+about 0.3 a "mode" has no peak left in the force spectrum and only bends the phase)."""
+
+
 class TimeDelay(AbstractEffect):
+    """The force acts `τ` after it is recorded: the whole prediction advanced by `τ`."""
+
     name: ClassVar[str] = "time_delay"
+    order: ClassVar[int] = 1
     tau: Float[Array, ""]  # [s]; > 0: the force acts tau after it is commanded
     dt: float = eqx.field(static=True)
 
@@ -224,8 +369,24 @@ class TimeDelay(AbstractEffect):
         idx = jnp.arange(n, dtype=y.dtype)
         return jnp.interp(idx + self.tau / self.dt, idx, y)
 
-    def order(self) -> int:
-        return 1
+    def constrained(self):
+        return self
+
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        tau = _f(self.tau)
+        return check(
+            (np.isfinite(tau), "non-finite delay"),
+            (tau > 0, f"non-causal delay τ = {1e3 * tau:.3g} ms (the force cannot act early)"),
+            (
+                tau >= context.record_dt * (1 - 1e-9),
+                f"delay τ = {1e3 * tau:.3g} ms shorter than one sample "
+                f"({1e3 * context.record_dt:.3g} ms)",
+            ),
+            (tau < 0.1 * context.duration, f"delay τ = {tau:.3g} s not short against the record"),
+        )
 
     def parameters(self):
         return {"tau": _f(self.tau)}
@@ -240,8 +401,12 @@ def _legendre(x: Array, degree: int) -> Array:
     return jnp.stack(cols, axis=-1)
 
 
-class PositionDependence(AbstractEffect):
+class PositionDependence(AbstractAdditiveEffect):
+    """`Σ c_k P_k(q̄) + A·sin(2πq/p) + B·cos(2πq/p)`: a smooth force over the travel
+    (Legendre terms: gravity, a spring) plus a ripple of pitch `p` (cogging)."""
+
     name: ClassVar[str] = "position_dependence"
+    order: ClassVar[int] = 0
     size: Float[Array, 5]  # 3 Legendre coefficients, sine and cosine of the ripple
     pitch: Any  # positive [m]
     centre: float = eqx.field(static=True)
@@ -258,6 +423,20 @@ class PositionDependence(AbstractEffect):
 
     def constrained(self):
         return eqx.tree_at(lambda e: e.pitch, self, replace_fn=_pos)
+
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        p = _f(self.pitch)
+        return check(
+            (_ok(self.size) and np.isfinite(p), "non-finite parameters"),
+            (p <= context.span, f"ripple pitch {p:.3g} m longer than the travel"),
+            (
+                p > 4 * max(context.resolution, 0.0),
+                f"ripple pitch {p:.3g} m not resolved by the encoder",
+            ),
+        )
 
     def parameters(self):
         s = np.asarray(self.size)
@@ -277,11 +456,12 @@ class ExternalForce(AbstractEffect):
     `detect_events` in the residual of the model without this effect, on every
     experiment); the amplitudes are profiled out by least squares against the remaining
     force error of each experiment (variable projection), since an unmeasured disturbance
-    cannot be predicted from one experiment to the next. ΔBIC counts three parameters per
-    event (start, end, amplitude).
+    cannot be predicted from one experiment to the next. The information criterion counts
+    three parameters per event (start, end, amplitude).
     """
 
     name: ClassVar[str] = "external_force"
+    order: ClassVar[int] = 2
 
     def apply(self, y, d, nominal):
         ev = d["events"]
@@ -291,11 +471,15 @@ class ExternalForce(AbstractEffect):
         amp = jnp.linalg.solve(gram + eps * jnp.eye(ev.shape[-1], dtype=ev.dtype), ev.T @ r)
         return y + ev @ amp
 
-    def order(self) -> int:
-        return 2
+    def constrained(self):
+        return self
 
     def extra_dof(self, arrays: Sequence[Mapping[str, Array]]) -> int:
         return 3 * sum(int(np.sum(np.any(np.asarray(d["events"]) != 0, axis=0))) for d in arrays)
+
+    def admissible(self, context):
+        # the events are found in the data; with none, the effect is the nominal model
+        return True, None
 
     def parameters(self):
         return {}
@@ -321,7 +505,7 @@ def _t_asym(ctx: Context) -> list[AbstractEffect]:
     base = _existing(ctx, "coulomb_friction")
     vs = base.vs if base is not None else jnp.asarray(_vs_default(ctx))
     fc = base.size[0] if base is not None else 0.0
-    return [AsymmetricFriction(jnp.array([fc, 0.0, 0.0]), vs)]
+    return [AsymmetricFriction(jnp.array([fc, fc, 0.0]), vs)]
 
 
 def _t_stribeck(ctx: Context) -> list[AbstractEffect]:
@@ -329,12 +513,13 @@ def _t_stribeck(ctx: Context) -> list[AbstractEffect]:
     vs = base.vs if base is not None else jnp.asarray(_vs_default(ctx))
     fc = base.size[0] if base is not None else 0.0
     vm = _vmax(ctx)
-    return [StribeckFriction(jnp.array([fc, 0.0]), jnp.asarray(f * vm), vs) for f in (0.02, 0.1)]
+    return [StribeckFriction(jnp.array([fc, fc]), jnp.asarray(f * vm), vs) for f in (0.02, 0.1)]
 
 
 def _t_backlash(ctx: Context) -> list[AbstractEffect]:
     dt = ctx.experiments[0].dt
-    return [Backlash(jnp.zeros(2), jnp.asarray(b), dt) for b in (2e-5, 1.5e-4)]
+    vs = jnp.asarray(_vs_default(ctx))
+    return [Backlash(jnp.zeros(3), jnp.asarray(b), vs, dt) for b in (2e-5, 1.5e-4)]
 
 
 def _t_resonance(ctx: Context) -> list[AbstractEffect]:
@@ -355,9 +540,12 @@ def _t_resonance(ctx: Context) -> list[AbstractEffect]:
 
 
 def _t_delay(ctx: Context) -> list[AbstractEffect]:
+    """Causal starts only: one and a half and four samples of the record, and 1 and 3 ms
+    when they are longer than a sample (a delay shorter than a sample is inadmissible)."""
     dt = ctx.experiments[0].dt
-    taus = [1.0e-3, 3.0e-3, -1.5e-3]
-    return [TimeDelay(jnp.asarray(t), dt) for t in taus if abs(t) >= 0.25 * dt]
+    rec = ctx.experiments[0].record_dt or dt
+    taus = sorted({1.5 * rec, 4.0 * rec} | {t for t in (1.0e-3, 3.0e-3) if t > 1.5 * rec})
+    return [TimeDelay(jnp.asarray(t), dt) for t in taus[:3]]
 
 
 def _t_position(ctx: Context) -> list[AbstractEffect]:
@@ -469,6 +657,14 @@ class DriveFamily(AbstractFamily):
     name = "drive"
     required = ("q", "u")
     optional = ("r",)
+    option_keys = (
+        "cutoff_hz",
+        "filter_order",
+        "decimation",
+        "friction_sharpness",
+        "zoh_force",
+        "controller_taps",
+    )
     target_label = "force u [N]"
 
     _MODEL_SIGNALS = ("q", "u", "r", "vir", "q_ref", "qg")
@@ -508,9 +704,9 @@ class DriveFamily(AbstractFamily):
         t = np.asarray(record.t)[sl]
         arrays = {"q": qf[sl], "v": v[sl], "a": a[sl], "y": uf[sl]}
         if float(np.ptp(q)) == 0.0:
-            raise ValueError(
-                f"diagnose(drive): experiment {name!r} has no motion (q is constant); the "
-                "inertia and friction are not identifiable. Give experiments with motion."
+            raise NotIdentifiable(
+                f"experiment {name!r} has no motion (q is constant): the inertia and friction "
+                "are not identifiable; record experiments with motion in both directions"
             )
         # noise: the white part of the force above the cut-off, carried into the band
         s0, _ = white_noise_floor(u - uf, fs)
@@ -538,7 +734,116 @@ class DriveFamily(AbstractFamily):
             noise_var=float(noise_var),
             signals=frozenset(record.names),
             source=record,
+            record_dt=float(record.dt),
+            resolution=quantisation_step(q),
         )
+
+    def identifiability(self, experiments: Sequence[Experiment], model: GapModel) -> str | None:
+        """The rigid axis is identified when the motion goes both ways with at least two
+        velocity reversals, the regressors `(q̈, q̇, 1)` are not collinear, and the
+        calibrated mass is positive and determined to better than 25 % (four standard
+        errors from zero; Fisher information with the effective sample size of the
+        residual) and the viscous friction is not negative."""
+        v = np.concatenate([e.arrays["v"] for e in experiments])
+        vm = float(np.max(np.abs(v)))
+        if vm == 0 or np.mean(v > 0.05 * vm) < 0.02 or np.mean(v < -0.05 * vm) < 0.02:
+            return (
+                "the axis moves in one direction only: inertia, viscous friction and offset "
+                "(and every friction effect) need motion both ways; record a back-and-forth "
+                "motion"
+            )
+        fast = v[np.abs(v) > 0.05 * vm]
+        reversals = int(np.sum(np.diff(np.sign(fast)) != 0))
+        if reversals < 2:
+            return (
+                f"only {reversals} velocity reversal(s): at least 2 are needed to separate "
+                "friction from the offset; record several back-and-forth moves"
+            )
+        phi = np.concatenate(
+            [np.stack([e.arrays["a"], e.arrays["v"], np.ones(e.n)], -1) for e in experiments]
+        )
+        norms = np.linalg.norm(phi, axis=0)
+        if np.any(norms == 0):
+            return "no acceleration in the record: the inertia is not excited"
+        sv = np.linalg.svd(phi / norms, compute_uv=False)
+        if sv[-1] / sv[0] < 1e-3:
+            return (
+                f"acceleration, velocity and a constant are collinear in the record (relative "
+                f"singular value {sv[-1] / sv[0]:.1e}): the inertia and viscous friction cannot "
+                "be told apart; excite the axis with varied accelerations"
+            )
+        nom = unwrap(model.nominal)
+        mass, fv = float(nom.M), float(nom.Fv)
+        y = np.concatenate([e.y for e in experiments])
+        pred = phi @ np.array([mass, fv, float(nom.offset)])
+        e = y - pred
+        n_eff = effective_samples(e)
+        sigma2 = float(np.mean(e**2)) * y.size / max(n_eff, 1.0)
+        cov = sigma2 * np.linalg.pinv(phi.T @ phi)
+        se_m = float(np.sqrt(max(cov[0, 0], 0.0)))
+        if not mass > 0:
+            return (
+                f"the calibrated mass is not positive (M = {mass:.4g} kg): the record does not "
+                "excite the inertia; record moves with clear accelerations"
+            )
+        if se_m > 0.25 * mass:
+            return (
+                f"the mass is not determined (M = {mass:.4g} ± {se_m:.2g} kg, one standard "
+                "error with the residual's correlation): excite the inertia more strongly"
+            )
+        if fv < 0:
+            return (
+                f"the calibrated viscous friction is negative (Fv = {fv:.4g} N·s/m): the record "
+                "does not separate it from the inertia and the offset"
+            )
+        return None
+
+    def admissibility_context(
+        self, experiments: Sequence[Experiment], model: GapModel
+    ) -> AdmissibilityContext:
+        q = np.concatenate([e.arrays["q"] for e in experiments])
+        dur = min(e.n * e.dt for e in experiments)
+        return AdmissibilityContext(
+            record_dt=max(e.record_dt or e.dt for e in experiments),
+            analysis_dt=experiments[0].dt,
+            band_hz=(2.0 / dur, float(self.options["cutoff_hz"])),
+            resolution=max(e.resolution for e in experiments),
+            duration=dur,
+            span=float(np.ptp(q)),
+            nominal=self.nominal_parameters(model),
+        )
+
+    def null_experiments(
+        self,
+        model: GapModel,
+        experiments: Sequence[Experiment],
+        rng: np.random.Generator,
+        count: int,
+    ) -> list[list[Experiment]]:
+        """Effect-free records of the calibrated rigid axis through each record's set-up.
+
+        With a reference `r` whose controller the record identifies (a linear controller
+        from `r` and the measured `q` to `u`, fitted by least squares, explaining at least
+        95 % of the force variance): the closed loop is simulated at the record's sampling
+        with that controller, the rigid axis (exact zero-order-hold discretisation), the
+        record's quantisation step (a random encoder zero per draw) and white force noise
+        of the controller fit's residual level (its white part). Otherwise (open loop, or no identifiable
+        controller) the record's own motion, low-pass filtered, is replayed: the force is
+        the nominal model's, plus white noise of the record's level, the position
+        re-quantised. Each simulated record then goes through the same preprocessing."""
+        nom = unwrap(model.nominal)
+        mass, fv, off = float(nom.M), float(nom.Fv), float(nom.offset)
+        out: list[list[Experiment]] = [[] for _ in range(count)]
+        for exp in experiments:
+            rec = exp.source
+            if rec is None:
+                raise ValueError(
+                    "diagnose(drive): the null needs the original records of the experiments."
+                )
+            sims = _null_records(rec, mass, fv, off, rng, count, self.options)
+            for k, sim in enumerate(sims):
+                out[k].append(self.prepare(sim, exp.name))
+        return out
 
     def describe_nominal(self) -> str:
         return "rigid axis M q̈ + Fv q̇ + offset = u (inverse dynamics, force predicted from motion)"
@@ -648,3 +953,135 @@ def _drive_masks(v: np.ndarray, vmax: float, dt: float) -> dict[str, np.ndarray]
         "positive velocity": v > thr,
         "negative velocity": v < -thr,
     }
+
+
+# ------------------------------------------------------------------------------ the null
+
+
+def _quantiser(step: float, sigma: float, rng: np.random.Generator, count: int):
+    """`x -> step·round((x + φ)/step) − φ + σ·n` per draw, `φ ~ U(0, step)` a random
+    encoder zero (so every draw has its own quantisation error), or white noise `σ`."""
+    phase = rng.uniform(0.0, step, size=(count, 1)) if step > 0 else np.zeros((count, 1))
+
+    def quantise(x: np.ndarray) -> np.ndarray:
+        if step > 0:
+            return step * np.round((x + phase) / step) - phase
+        return x + sigma * rng.standard_normal(x.shape)
+
+    return quantise
+
+
+def identify_controller(
+    q: np.ndarray, u: np.ndarray, r: np.ndarray, dt: float, taps: int
+) -> tuple[np.ndarray, float, float]:
+    """A linear digital controller `u_k = Σ_i a_i r_{k−i} + Σ_i b_i q_{k−i} + c·I_k + d`
+    (`taps` past samples of each, `I` the integral of `r − q`) fitted to a closed-loop
+    record by least squares: it reproduces P, PI, cascade and filtered-velocity loops
+    without knowing their structure.
+
+    **Returns:** `(coefficients, r2, sigma)`: coefficients in the order
+    `a_0..a_{L−1}, b_0..b_{L−1}, c, d`, the share of the force variance explained, and
+    the standard deviation of the residual's white part [N] (the force measurement
+    noise when the controller is linear)."""
+    n = q.size
+    win = np.lib.stride_tricks.sliding_window_view
+    rp = np.concatenate([np.full(taps - 1, r[0]), r])
+    qp = np.concatenate([np.full(taps - 1, q[0]), q])
+    cols_r = win(rp, taps)[:, ::-1]
+    cols_q = win(qp, taps)[:, ::-1]
+    integ = np.cumsum(r - q) * dt
+    phi = np.concatenate([cols_r, cols_q, integ[:, None], np.ones((n, 1))], axis=1)
+    scale = np.sqrt(np.mean(phi**2, axis=0)) + 1e-300
+    coef, *_ = np.linalg.lstsq(phi / scale, u, rcond=1e-10)
+    coef = coef / scale
+    res = u - phi @ coef
+    var_u = float(np.var(u))
+    r2 = 1.0 - float(np.var(res)) / var_u if var_u > 0 else 0.0
+    # the white part of the residual (robust successive differences): a disturbance the
+    # record carries besides the controller output (force pulses injected into the drive)
+    # is not measurement noise and does not belong in the null
+    return coef, r2, difference_noise_sigma(res)
+
+
+def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Record]:
+    q = np.asarray(rec["q"], float)
+    u = np.asarray(rec["u"], float)
+    dt = float(rec.dt)
+    fs = 1.0 / dt
+    n = q.size
+    step = quantisation_step(q)
+    cutoff = float(options["cutoff_hz"])
+    sos = ss.butter(int(options.get("filter_order", 4)), cutoff, fs=fs, output="sos")
+    pad = int(min(n - 1, 3 * fs / cutoff))
+    qf = ss.sosfiltfilt(sos, q, padlen=pad)
+    sigma_q = 0.0 if step > 0 else float(np.std(q - qf))
+    quantise = _quantiser(step, sigma_q, rng, count)
+    sims = None
+    if "r" in rec.names:
+        r = np.asarray(rec["r"], float)
+        taps = int(options.get("controller_taps", 16))
+        coef, r2, sigma_u = identify_controller(q, u, r, dt, taps)
+        if r2 >= 0.95:
+            sims = _closed_loop(coef, taps, r, q[0], mass, fv, off, dt, quantise, count)
+            track = float(np.sqrt(np.mean((q - r) ** 2))) + 10 * max(step, sigma_q)
+            ok = np.all(np.isfinite(sims[0]), axis=1) & (
+                np.sqrt(np.mean((sims[0] - r) ** 2, axis=1)) < 10 * track
+            )
+            if not np.all(ok):
+                sims = None  # the identified loop does not track: replay instead
+            else:
+                q_sim, u_sim = sims
+                u_sim = u_sim + sigma_u * rng.standard_normal(u_sim.shape)
+                sims = (q_sim, u_sim)
+    if sims is None:
+        # replay of the record's in-band motion; the force acting at t_k + dt/2 is what a
+        # held sample represents (see `prepare`)
+        v = np.gradient(qf, dt, edge_order=2)
+        a = np.gradient(v, dt, edge_order=2)
+        force = mass * a + fv * v + off
+        if options.get("zoh_force", True):
+            t = np.arange(n) * dt
+            force = np.interp(t + 0.5 * dt, t, force)
+        sigma_u = white_noise_floor(u - ss.sosfiltfilt(sos, u, padlen=pad), fs)[1]
+        u_sim = force[None, :] + sigma_u * rng.standard_normal((count, n))
+        q_sim = quantise(np.broadcast_to(qf, (count, n)))
+        sims = (q_sim, u_sim)
+    q_sim, u_sim = sims
+    out = []
+    for k in range(count):
+        signals = {"q": q_sim[k], "u": u_sim[k]}
+        if "r" in rec.names:
+            signals["r"] = np.asarray(rec["r"], float)
+        out.append(Record(signals, dt=dt, metadata={"source": "null"}))
+    return out
+
+
+def _closed_loop(coef, taps, r, q0, mass, fv, off, dt, quantise, count):
+    """`count` closed loops of the rigid axis with the identified controller, vectorised
+    over the draws: exact zero-order-hold discretisation of `M q̈ + Fv q̇ = F − offset`."""
+    import scipy.linalg as sl
+
+    a_c = np.array([[0.0, 1.0], [0.0, -fv / mass]])
+    b_c = np.array([[0.0], [1.0 / mass]])
+    big = np.zeros((3, 3))
+    big[:2, :2], big[:2, 2:] = a_c * dt, b_c * dt
+    e = sl.expm(big)
+    ad, bd = e[:2, :2], e[:2, 2]
+    n = r.size
+    a_r, b_q, c_i, d0 = coef[:taps], coef[taps : 2 * taps], coef[2 * taps], coef[2 * taps + 1]
+    rp = np.concatenate([np.full(taps - 1, r[0]), r])
+    u_r = np.lib.stride_tricks.sliding_window_view(rp, taps)[:, ::-1] @ a_r + d0
+    x = np.zeros((count, 2))
+    x[:, 0] = q0
+    qbuf = np.tile(quantise(np.full((count, 1), q0))[:, :1], (1, taps))
+    integ = np.zeros(count)
+    q_out = np.empty((count, n))
+    u_out = np.empty((count, n))
+    for k in range(n):
+        qm = quantise(x[:, :1])[:, 0]
+        qbuf = np.concatenate([qm[:, None], qbuf[:, :-1]], axis=1)
+        integ = integ + (r[k] - qm) * dt
+        force = u_r[k] + qbuf @ b_q + c_i * integ
+        q_out[:, k], u_out[:, k] = qm, force
+        x = x @ ad.T + np.outer(force - off, bd)
+    return q_out, u_out

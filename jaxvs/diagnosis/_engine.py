@@ -1,20 +1,26 @@
 """Augment and recalibrate: the greedy search for the effects that close the gap.
 
 1. The nominal model is recalibrated on the calibration experiments (Levenberg–Marquardt
-   through `jaxvs.calibrate`), so ordinary parameter error is never taken for a missing
-   effect.
-2. Every testable candidate of the family's library is tried from its starting shapes:
+   through the calibration kernel), so ordinary parameter error is never taken for a
+   missing effect. A record that does not identify it gets no search at all
+   (`family.identifiability`: the reason is reported instead of a verdict).
+2. The null: `family.null_experiments` simulates K effect-free copies of the records
+   from the calibrated model through the recorded set-up; the nominal model refitted on
+   them gives the noise floor (the median of their held-out gaps).
+3. Every testable candidate of the family's library is tried from its starting shapes:
    the parameters it is linear in are set by least squares against the current residual
-   (a score test: the share of the residual the effect's regressors explain is its
-   *signature*), the best shape is kept.
-3. The best candidates by signature are added to the model one at a time and the whole
-   model -- nominal and effect parameters together -- is recalibrated with LM.
-4. A candidate is accepted when, on held-out experiments the calibration never saw, the
-   gap reduction has a moving-block bootstrap interval excluding zero, ΔBIC > 10 on the
-   calibration data, and it removes at least `min_shrink` of the gap. Among the accepted,
-   a simpler effect goes before its own extension (Coulomb before Stribeck, the
-   principle of marginality), otherwise the lowest held-out gap wins. Effects are added
-   greedily until none passes.
+   (the share of the residual this explains is its *signature*), then the whole model --
+   nominal and effect parameters together -- is recalibrated with LM, all starts in one
+   vectorised call. The best **admissible** start by calibration cost is kept
+   (`effect.admissible`); an inadmissible best fit is reported, never accepted.
+4. A candidate passes when, on held-out experiments the calibration never saw, its gap
+   reduction has a moving-block bootstrap interval excluding zero, removes at least
+   `min_shrink` of the gap, has ΔBIC > `min_delta_bic` with an effective sample size,
+   and exceeds what the same candidate, from the same start, gains on the null records
+   (`null_threshold`). Among those that pass, a base goes before its own extension
+   (marginality), otherwise the largest held-out reduction wins. Effects are added
+   greedily until none passes; the primary effect is the one that explains most of the
+   held-out gap.
 
 All experiments of one role are padded to a common length and stacked, so that every
 prediction, Jacobian and calibration is one vectorised call (one compilation per model
@@ -25,7 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -33,10 +39,17 @@ import jax
 import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
+import scipy.stats
 
 from ..calibration import free_spec, lm_init, lm_running, lm_step, unwrap
 from ._base import AbstractFamily, Context, EffectSpec, Experiment, GapModel
-from ._stats import bic, block_length, gap_change_interval, nrmse
+from ._stats import (
+    bic_effective,
+    block_length,
+    effective_samples,
+    gap_change_interval,
+    nrmse,
+)
 
 __all__ = ["CandidateResult", "SearchResult", "search"]
 
@@ -101,17 +114,17 @@ def _index_model(models: GapModel, i: int) -> GapModel:
 
 
 @eqx.filter_jit
-def _fit_many(models: GapModel, psize, batch, wfit, max_steps: int):
-    """For each stacked starting model (same structure, gated effects): least-squares
-    values of the parameters selected by `psize` (the candidate's sizes, one one-hot
-    column each), then LM on every free parameter (weights `wfit`: zero on held-out rows;
-    switched-off effects have zero Jacobian columns and stay put). Returns the calibrated
-    (constrained) models, the cost after LM and after the least-squares start, and the
-    predictions on every row."""
-    inputs = _model_inputs(batch)
-    y = batch["y"]
+def _fit_many(models: GapModel, psize, batch, wfit, max_steps: int, data_axis: int | None):
+    """For each stacked starting model (same structure): least-squares values of the
+    parameters selected by `psize` (the candidate's sizes, one one-hot column each), then
+    LM on every free parameter (weights `wfit`: zero on held-out rows). With `data_axis`
+    0, `batch` and `wfit` carry one data set per model (the null records); with `None`
+    every model sees the same data. Returns the calibrated (constrained) models, the cost
+    after LM and after the least-squares start, and the predictions on every row."""
 
-    def one(model: GapModel, ps):
+    def one(model: GapModel, ps, batch, wfit):
+        inputs = _model_inputs(batch)
+        y = batch["y"]
         spec = free_spec(model)
         params, static = eqx.partition(model, spec)
         flat, unravel = jax.flatten_util.ravel_pytree(params)
@@ -147,7 +160,7 @@ def _fit_many(models: GapModel, psize, batch, wfit, max_steps: int):
         pred = jax.vmap(unwrap(final))(inputs)
         return final, state.cost, cost_start, pred
 
-    return eqx.filter_vmap(one)(models, psize)
+    return eqx.filter_vmap(one, in_axes=(0, 0, data_axis, data_axis))(models, psize, batch, wfit)
 
 
 def size_selector(model: GapModel, slot: int | None, width: int) -> np.ndarray:
@@ -175,18 +188,29 @@ def size_selector(model: GapModel, slot: int | None, width: int) -> np.ndarray:
 def fit_many(
     models: Sequence[GapModel],
     slots: Sequence[int | None],
-    experiments: Sequence[Experiment],
+    experiments: Sequence[Experiment] | Sequence[Sequence[Experiment]],
     n_cal: int,
     scale: float,
     max_steps: int,
 ) -> tuple[list[GapModel], np.ndarray, np.ndarray, list[list[np.ndarray]]]:
-    """Calibrate several gated starting models of one structure on the first `n_cal`
+    """Calibrate several starting models of one structure on the first `n_cal`
     experiments in one vectorised call (the sizes of effect `slots[i]` of start `i` are
-    first set by least squares). Returns the (physical) models, their calibration SSR
-    after LM and at the least-squares start (the signature), and their predictions on
-    every experiment."""
-    batch = stack(experiments, scale)
-    wfit = batch["w"].at[n_cal:].set(0.0)
+    first set by least squares). `experiments` is one list of experiments for all the
+    models, or one list per model (the null records: start `i` on data set `i`).
+    Returns the (physical) models, their calibration SSR after LM and at the
+    least-squares start (the signature), and their predictions on every experiment."""
+    per_model = not isinstance(experiments[0], Experiment)
+    if per_model:
+        batches = [stack(list(e), scale) for e in experiments]
+        batch = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *batches)
+        wfit = batch["w"].at[:, n_cal:].set(0.0)
+        data_axis = 0
+        exp_lists = [list(e) for e in experiments]
+    else:
+        batch = stack(experiments, scale)
+        wfit = batch["w"].at[n_cal:].set(0.0)
+        data_axis = None
+        exp_lists = [list(experiments)] * len(models)
     width = max(
         [
             int(np.size(m.effects[s].size))
@@ -197,13 +221,13 @@ def fit_many(
     )
     psize = jnp.asarray(np.stack([size_selector(m, s, width) for m, s in zip(models, slots)]))
     stacked = _stack_models([m.constrained() for m in models])
-    out, cost, cost_start, pred = _fit_many(stacked, psize, batch, wfit, max_steps)
+    out, cost, cost_start, pred = _fit_many(stacked, psize, batch, wfit, max_steps, data_axis)
     cost = np.asarray(cost) * 2.0 / scale**2
     cost = np.where(np.isfinite(cost), cost, np.inf)
     cost_start = np.asarray(cost_start) * 2.0 / scale**2
     cost_start = np.where(np.isfinite(cost_start), cost_start, np.inf)
     fitted = [unwrap(_index_model(out, i)) for i in range(len(models))]
-    preds = [_unstack(np.asarray(pred)[i], experiments) for i in range(len(models))]
+    preds = [_unstack(np.asarray(pred)[i], exp_lists[i]) for i in range(len(models))]
     return fitted, cost, cost_start, preds
 
 
@@ -216,7 +240,7 @@ class CandidateResult:
 
     effect: str
     testable: bool
-    reason: str | None = None
+    reason: str | None = None  # why not testable, or why inadmissible
     round: int = 0
     signature: float = 0.0  # share of the current residual its regressors explain
     calibration_gap: float | None = None
@@ -230,13 +254,20 @@ class CandidateResult:
     parameters: dict[str, float] = dataclasses.field(default_factory=dict)
     extends: str | None = None
     description: str = ""
-    physical: bool = True
+    admissible: bool | None = None
+    null_p95: float | None = None  # the null's 95th percentile of the held-out reduction
+    null_median: float | None = None
+    null_threshold: float | None = None  # the level it had to beat (multiplicity-corrected)
+    rejected_by: str | None = None  # the first acceptance test it failed
+    explained: float = 0.0  # held-out reduction it brought when accepted (gap units)
     model: GapModel | None = None
     seconds: float = 0.0
 
     @property
-    def passes(self) -> bool:
-        return bool(self.accepted)
+    def reduction(self) -> float:
+        if self.gap_before is None or self.validation_gap is None:
+            return -np.inf
+        return self.gap_before - self.validation_gap
 
 
 @dataclasses.dataclass
@@ -252,20 +283,69 @@ class SearchResult:
     nominal_residuals: list[np.ndarray]
     final_residuals: list[np.ndarray]
     round_residuals: list[list[np.ndarray]]  # at the start of each round
+    noise_floor: float = 0.0
+    null_gaps: list[float] = dataclasses.field(default_factory=list)
+    not_identifiable: str | None = None
+    primary: str | None = None
 
 
 # ------------------------------------------------------------------------------ search
 
 
-def _passes(c: CandidateResult, min_shrink: float, min_delta_bic: float) -> bool:
-    return (
-        c.physical
-        and c.delta_bic is not None
-        and c.delta_bic > min_delta_bic
-        and c.reduction_interval is not None
-        and c.reduction_interval[0] > 0
-        and (c.shrink or 0.0) >= min_shrink
-    )
+def _first_failure(c: CandidateResult, min_shrink: float, min_delta_bic: float) -> str | None:
+    """The first acceptance test (before the null) a tried candidate fails, or None."""
+    if not c.admissible:
+        return f"inadmissible: {c.reason}"
+    if c.reduction_interval is None or not c.reduction_interval[0] > 0:
+        return "held-out reduction not significant (bootstrap interval includes zero)"
+    if (c.shrink or 0.0) < min_shrink:
+        return f"shrink below {min_shrink:g}"
+    if c.delta_bic is None or not c.delta_bic > min_delta_bic:
+        return f"ΔBIC (effective sample size) not above {min_delta_bic:g}"
+    return None
+
+
+def choose(passing: Sequence[CandidateResult], accepted: Sequence[str]) -> CandidateResult:
+    """The candidate to add among those that pass every test: by held-out evidence, the
+    largest reduction of the validation gap; but a base before its own extension when
+    both pass (the principle of marginality: Stribeck friction only after Coulomb)."""
+    names = {c.effect for c in passing}
+    eligible = [c for c in passing if not (c.extends in names and c.extends not in accepted)]
+    return max(eligible, key=lambda c: c.reduction)
+
+
+def primary_effect(
+    accepted: Sequence[str], candidates: Mapping[str, CandidateResult]
+) -> str | None:
+    """The accepted effect that explains most of the held-out gap: the largest validation
+    gap reduction it brought when it was added (an extension that replaced its base
+    counts with the base's reduction, as itself)."""
+    if not accepted:
+        return None
+    return max(accepted, key=lambda a: candidates[a].explained)
+
+
+def null_threshold(gains: Sequence[float], level: float, tested: int) -> float:
+    """The held-out reduction a candidate must exceed: the `level` quantile of its gains on
+    the null records, and, since several candidates face the null in one round, at
+    least the normal tail quantile `mean + z·sd` at level `1 − (1 − level)/tested`
+    (Bonferroni across the candidates tested; the few null records cannot resolve that
+    tail empirically)."""
+    g = np.asarray([v for v in gains if np.isfinite(v)], float)
+    if g.size < 2:
+        return float("inf")
+    alpha = (1.0 - level) / max(int(tested), 1)
+    z = float(scipy.stats.norm.ppf(1.0 - alpha))
+    return max(float(np.quantile(g, level)), float(g.mean() + z * g.std(ddof=1)))
+
+
+def _nrmse_rows(res: Sequence[np.ndarray], exps: Sequence[Experiment]) -> float:
+    return nrmse(np.concatenate(list(res)), np.concatenate([e.y for e in exps]))
+
+
+def _quantile(x: Sequence[float], q: float) -> float:
+    x = np.asarray([v for v in x if np.isfinite(v)], float)
+    return float(np.quantile(x, q)) if x.size else float("inf")
 
 
 def search(
@@ -278,22 +358,28 @@ def search(
     min_shrink: float = 0.05,
     min_delta_bic: float = 10.0,
     n_boot: int = 300,
+    n_null: int = 19,
+    null_level: float = 0.95,
     seed: int = 0,
     stop_at_noise: float = 1.1,
     progress: Callable[[str], None] | None = None,
 ) -> SearchResult:
-    """Nominal recalibration, then the greedy augment-and-recalibrate loop (module doc).
+    """Nominal recalibration, the identifiability check, the null, then the greedy
+    augment-and-recalibrate loop (module doc).
 
-    The loop stops when no candidate passes, after `max_effects` effects, or when the
-    validation gap is within `stop_at_noise` times the noise floor (nothing left to
-    explain). A candidate with no evidence at all (ΔBIC ≤ 0) in one round is not tried in
-    later rounds.
-
-    Every effect of the library sits in one gated model (see `GapModel`), so that each
-    round -- all candidates from all their starting shapes -- is one vectorised
-    calibration with one compilation for the whole diagnosis.
+    A candidate is accepted when its best admissible fit passes every test: held-out
+    reduction with a block-bootstrap interval above zero, shrink ≥ `min_shrink`, ΔBIC
+    with the residual's effective sample size above `min_delta_bic`, and a held-out
+    reduction above the `null_level` quantile of what the same candidate gains on
+    `n_null` effect-free records of the same set-up (`family.null_experiments`). Among
+    the accepted, a base goes before its extension (marginality), otherwise the largest
+    held-out reduction wins. The loop stops when no candidate passes, after
+    `max_effects` effects, or when the validation gap is within `stop_at_noise` times
+    the null's noise floor. A candidate whose admissible fit made the held-out gap
+    significantly worse in one round is not tried again.
     """
     say = progress or (lambda msg: None)
+    rng = np.random.default_rng(seed)
     y_all = np.concatenate([e.y for e in calibration])
     scale = 1.0 / max(float(np.sqrt(np.mean(y_all**2))), 1e-300)
     n_cal_exp = len(calibration)
@@ -301,9 +387,6 @@ def search(
     y_cal = np.concatenate([e.y for e in calibration])
     y_val = np.concatenate([e.y for e in validation])
     exps = list(calibration) + list(validation)
-    noise_floor = float(
-        np.sqrt(sum(e.noise_var * e.n for e in validation) / max(float(np.sum(y_val**2)), 1e-300))
-    )
 
     library = family.library()
     specs = {s.name: s for s in library}
@@ -321,19 +404,56 @@ def search(
     nominal_model = model
     res_all = [e.y - p for e, p in zip(exps, pred)]
     nominal_residuals = list(res_all)
+
+    def result(**kw) -> SearchResult:
+        base = dict(
+            nominal=nominal_model,
+            final=model,
+            accepted=accepted,
+            candidates=candidates,
+            history=history,
+            scale=scale,
+            calibration=exps[:n_cal_exp],
+            validation=exps[n_cal_exp:],
+            nominal_residuals=nominal_residuals,
+            final_residuals=list(res_all),
+            round_residuals=round_residuals,
+        )
+        base.update(kw)
+        return SearchResult(**base)
+
     accepted: list[str] = []
     history: list[dict[str, Any]] = []
     round_residuals: list[list[np.ndarray]] = []
 
+    why = family.identifiability(exps[:n_cal_exp], model)
+    if why is not None:
+        say(f"not identifiable: {why}")
+        return result(not_identifiable=why)
+    context = family.admissibility_context(exps[:n_cal_exp], model)
+
+    say(f"simulating {n_null} effect-free records of the same set-up (the null)")
+    null_sets = family.null_experiments(model, exps, rng, n_null)
+    null_fit, _, _, null_pred = fit_many(
+        [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps
+    )
+    null_res = [[e.y - p for e, p in zip(ns, pr)] for ns, pr in zip(null_sets, null_pred)]
+    null_gaps = [_nrmse_rows(r[n_cal_exp:], ns[n_cal_exp:]) for r, ns in zip(null_res, null_sets)]
+    noise_floor = float(np.median(null_gaps))
+    null_models = list(null_fit)
+    say(f"noise floor (median gap of the nominal model on the null records): {noise_floor:.4g}")
+
     dof0 = _dof(model, exps[:n_cal_exp])
     for rnd in range(1, max_effects + 1):
         ssr0 = float(cost[0])
-        bic0 = bic(ssr0, n_cal, dof0)
         e_val0 = np.concatenate(res_all[n_cal_exp:])
         blen = block_length(e_val0)
         for s in library:
             if s.refresh is not None and candidates[s.name].testable:
                 exps = [s.refresh(e, r) for e, r in zip(exps, res_all)]
+                null_sets = [
+                    [s.refresh(e, r) for e, r in zip(ns, nr)] for ns, nr in zip(null_sets, null_res)
+                ]
 
         open_specs: list[EffectSpec] = []
         for s in library:
@@ -344,15 +464,21 @@ def search(
             if s.extends is not None and any(specs[a].extends == s.extends for a in accepted):
                 continue  # a sibling extension of the same base is already in
             prev = candidates[s.name]
-            if prev.delta_bic is not None and prev.delta_bic <= 0 and s.extends is None:
-                continue  # no evidence at all in an earlier round: not tried again
+            if (
+                prev.admissible
+                and prev.reduction_interval is not None
+                and prev.reduction_interval[1] < 0
+                and s.extends is None
+            ):
+                continue  # an admissible fit that made the held-out gap significantly worse
+
             open_specs.append(s)
         if not open_specs:
             break
 
         ctx = Context(model, exps[:n_cal_exp], res_all[:n_cal_exp], family.options)
-        tried: list[tuple[EffectSpec, list[GapModel], np.ndarray, np.ndarray, list]] = []
         t_round = time.perf_counter()
+        round_results: list[CandidateResult] = []
         for s in open_specs:
             templates = s.templates(ctx)
             if not templates:
@@ -365,22 +491,22 @@ def search(
             fitted, costs, starts_ssr, preds = fit_many(
                 starts, [slot] * len(starts), exps, n_cal_exp, scale, max_steps
             )
-            candidates[s.name].seconds += time.perf_counter() - t0
-            # the structure (hence the parameter count) is that of the starting points
-            dof_s = _dof(starts[0], exps[:n_cal_exp])
-            tried.append((s, fitted, costs, starts_ssr, preds, dof_s))
-        elapsed = time.perf_counter() - t_round
-
-        round_results: list[CandidateResult] = []
-        for s, fitted, costs, starts_ssr, preds, dof_s in tried:
-            k = int(np.argmin(costs))
-            m1, ssr1, pred1 = fitted[k], float(costs[k]), preds[k]
             c = candidates[s.name]
+            c.seconds += time.perf_counter() - t0
             c.signature = max(0.0, 1.0 - float(np.min(starts_ssr)) / max(ssr0, 1e-300))
+            # the best admissible start by calibration cost; else the best, reported
+            verdicts = []
+            for m in fitted:
+                eff = next(e for e in m.effects if e.name == s.name)
+                verdicts.append(eff.admissible(context))
+            order = np.argsort(costs)
+            ok = [int(k) for k in order if verdicts[k][0] and np.isfinite(costs[k])]
+            k = ok[0] if ok else int(order[0])
+            m1, ssr1, pred1 = fitted[k], float(costs[k]), preds[k]
             if not np.isfinite(ssr1):
                 continue
+            dof_s = _dof(starts[0], exps[:n_cal_exp])
             r1 = [e.y - p for e, p in zip(exps, pred1)]
-            dbic = bic0 - bic(ssr1, n_cal, dof_s)
             g0, g1, shrink, d_int, s_int = gap_change_interval(
                 e_val0,
                 np.concatenate(r1[n_cal_exp:]),
@@ -396,16 +522,58 @@ def search(
             c.shrink = shrink
             c.shrink_interval = s_int
             c.reduction_interval = d_int
-            c.delta_bic = dbic
+            # effective sample size from the candidate's own residual: under the
+            # alternative it is what is left (noise); the nominal residual is correlated
+            # by the very effect under test, which would discount real evidence
+            n_eff = effective_samples(np.concatenate(r1[:n_cal_exp]))
+            c.delta_bic = bic_effective(ssr0, n_cal, dof0, n_eff) - bic_effective(
+                ssr1, n_cal, dof_s, n_eff
+            )
             eff = next(e for e in m1.effects if e.name == s.name)
             c.parameters = eff.parameters()
-            c.physical = eff.physical()
+            c.admissible, why_not = verdicts[k]
+            c.reason = why_not
+            c.null_p95 = c.null_median = c.null_threshold = None
             c.model = m1
-            c._state = (r1, ssr1, dof_s)  # type: ignore[attr-defined]
+            c._state = (r1, ssr1, dof_s, starts[k], slot)  # type: ignore[attr-defined]
+            c.rejected_by = _first_failure(c, min_shrink, min_delta_bic)
             round_results.append(c)
-        round_results.sort(key=lambda c: -(c.delta_bic or -np.inf))
 
-        passing = [c for c in round_results if _passes(c, min_shrink, min_delta_bic)]
+        # the null: what each remaining candidate gains, from the same start, on the
+        # effect-free records (fitted after the current model has been refitted there)
+        pending = [c for c in round_results if c.rejected_by is None]
+        for c in pending:
+            _, _, _, start, slot = c._state  # type: ignore[attr-defined]
+            t0 = time.perf_counter()
+            say(f"round {rnd}: {c.effect} on {n_null} null records")
+            null_starts = [
+                eqx.tree_at(lambda m: m.nominal, start, nm.nominal) for nm in null_models
+            ]
+            null_starts = [
+                GapModel(ns.nominal, tuple(_with_fit(e, nm) for e, nm in zip_effects(ns, nm)))
+                for ns, nm in zip(null_starts, null_models)
+            ]
+            _, _, _, pr1 = fit_many(
+                null_starts, [slot] * n_null, null_sets, n_cal_exp, scale, max_steps
+            )
+            gains = []
+            for ns, nr, p in zip(null_sets, null_res, pr1):
+                before = _nrmse_rows(nr[n_cal_exp:], ns[n_cal_exp:])
+                after = _nrmse_rows([e.y - q for e, q in zip(ns, p)][n_cal_exp:], ns[n_cal_exp:])
+                gains.append(before - after)
+            c.seconds += time.perf_counter() - t0
+            c.null_p95 = _quantile(gains, null_level)
+            c.null_median = _quantile(gains, 0.5)
+            c.null_threshold = null_threshold(gains, null_level, len(round_results))
+            if not c.reduction > c.null_threshold:
+                c.rejected_by = (
+                    f"held-out reduction {c.reduction:.3g} not above the null threshold "
+                    f"{c.null_threshold:.3g} (95th percentile {c.null_p95:.3g})"
+                )
+        elapsed = time.perf_counter() - t_round
+
+        passing = [c for c in round_results if c.rejected_by is None]
+        round_results.sort(key=lambda c: -c.reduction)
         round_residuals.append(list(res_all))
         history.append(
             {
@@ -417,8 +585,13 @@ def search(
                         "validation_gap": c.validation_gap,
                         "shrink": c.shrink,
                         "delta_bic": c.delta_bic,
-                        "physical": c.physical,
+                        "admissible": c.admissible,
+                        "reason": c.reason,
+                        "null_p95": c.null_p95,
+                        "null_threshold": c.null_threshold,
+                        "rejected_by": c.rejected_by,
                         "passes": c in passing,
+                        "parameters": dict(c.parameters),
                     }
                     for c in round_results
                 },
@@ -426,30 +599,41 @@ def search(
         )
         if not passing:
             break
-        names = {c.effect for c in passing}
-        # marginality: a base before its extension when both pass; else the best ΔBIC
-        eligible = [c for c in passing if not (c.extends in names and c.extends not in accepted)]
-        chosen = max(eligible, key=lambda c: c.delta_bic)
+        chosen = choose(passing, accepted)
         chosen.accepted = True
+        chosen.rejected_by = None
+        chosen.explained = chosen.reduction
+        if chosen.extends in accepted:
+            # the extension replaced its base in the model; both stay in the order of
+            # addition, and the extension counts the base's reduction as its own
+            base = candidates[chosen.extends]
+            chosen.explained += base.explained
+            base.explained = 0.0
         accepted.append(chosen.effect)
         model = chosen.model
-        res_all, ssr, dof0 = chosen._state  # type: ignore[attr-defined]
+        res_all, ssr, dof0, _, _ = chosen._state  # type: ignore[attr-defined]
         cost = np.array([ssr])
+        # the current model refitted on every null record, for the next round's null
+        null_models, _, _, null_pred = fit_many(
+            [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps
+        )
+        null_res = [[e.y - p for e, p in zip(ns, pr)] for ns, pr in zip(null_sets, null_pred)]
         say(f"round {rnd}: accepted {chosen.effect} (validation gap {chosen.validation_gap:.4f})")
         if chosen.validation_gap <= stop_at_noise * noise_floor:
             say("the remaining gap is within the noise floor: stopping")
             break
 
-    return SearchResult(
-        nominal_model,
-        model,
-        accepted,
-        candidates,
-        history,
-        scale,
-        exps[:n_cal_exp],
-        exps[n_cal_exp:],
-        nominal_residuals,
-        list(res_all),
-        round_residuals,
-    )
+    primary = primary_effect(accepted, candidates)
+    return result(noise_floor=noise_floor, null_gaps=null_gaps, primary=primary)
+
+
+def zip_effects(start: GapModel, fitted: GapModel):
+    """Pairs of (effect of `start`, effect of the same name in `fitted` or None)."""
+    by_name = {e.name: e for e in fitted.effects}
+    return [(e, by_name.get(e.name)) for e in start.effects]
+
+
+def _with_fit(effect, fitted):
+    """The start's effect with the values fitted on a null record when there are some
+    (the accepted effects), else the start's template (the candidate)."""
+    return fitted if fitted is not None else effect

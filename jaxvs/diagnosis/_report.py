@@ -41,9 +41,11 @@ class DiagnosisReport:
 
     **Fields (JSON):** `family`, `gap` (`metric`, `calibration`, `validation`,
     `noise_floor`), `where` (significant gap-map cells, most concentrated first),
-    `candidates` (best first), `verdict` (`effects` in the order added, `primary`,
-    `validation_gap`, `shrink`, `shrink_interval`, `adequate`), `nominal`, `data`,
-    `rounds`, `timing`. See `to_json()`.
+    `candidates` (best first; each with `admissible`, `reason`, `null_p95`,
+    `null_threshold`, `rejected_by`), `verdict` (`effects` in the order added,
+    `final_effects`, `primary`, `validation_gap`, `shrink`, `shrink_interval`, `adequate`;
+    `None` when the record cannot identify the nominal model), `not_identifiable` (the
+    reason, or `None`), `nominal`, `data`, `rounds`, `timing`. See `to_json()`.
 
     **Fields (Python only):** `nominal_model`, `final_model` (`GapModel`s),
     `calibration`, `validation` (`Experiment`s), `predictions` (per experiment, nominal
@@ -88,6 +90,19 @@ class DiagnosisReport:
 
     def to_markdown(self) -> str:
         c = self.content
+        if c.get("not_identifiable"):
+            return "\n".join(
+                [
+                    f"# Sim-to-real gap diagnosis — family `{c['family']}`",
+                    "",
+                    f"Nominal model: {c['nominal']['model']}.",
+                    "",
+                    "## Not identifiable: no verdict",
+                    "",
+                    f"{c['not_identifiable']}.",
+                    "",
+                ]
+            )
         g = c["gap"]
         v = c["verdict"]
         pct = lambda x: "—" if x is None else f"{100 * x:.2f} %"
@@ -109,9 +124,10 @@ class DiagnosisReport:
             )
         else:
             lines.append(
-                "No candidate effect passed (held-out gap reduction with a bootstrap interval "
-                "excluding zero, ΔBIC > 10): the nominal model is adequate up to the noise "
-                f"and the effects tested. Validation gap {pct(g['validation'])}, noise floor "
+                "No candidate effect passed (an admissible fit whose held-out gap reduction "
+                "has a bootstrap interval excluding zero and exceeds what it gains on "
+                "effect-free records of the same set-up): the nominal model is adequate up to "
+                f"the noise floor and the effects tested. Validation gap {pct(g['validation'])}, noise floor "
                 f"{pct(g['noise_floor'])}."
             )
         lines += [
@@ -153,12 +169,13 @@ class DiagnosisReport:
             "",
             "## Candidate effects (best first)",
             "",
-            "| effect | testable | signature | validation gap | shrink [95 % CI] | ΔBIC | accepted | parameters |",
-            "|---|---|---|---|---|---|---|---|",
+            "| effect | testable | signature | validation gap | shrink [95 % CI] | ΔBIC | "
+            "null 95 % | admissible | accepted | parameters |",
+            "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for k in c["candidates"]:
             if not k["testable"]:
-                lines.append(f"| {k['effect']} | no: {k['reason']} | | | | | no | |")
+                lines.append(f"| {k['effect']} | no: {k['reason']} | | | | | | | no | |")
                 continue
             ci = k.get("shrink_interval")
             shr = (
@@ -168,9 +185,14 @@ class DiagnosisReport:
             )
             par = ", ".join(f"{n} = {val:.4g}" for n, val in (k.get("parameters") or {}).items())
             dbic = "—" if k.get("delta_bic") is None else f"{k['delta_bic']:.1f}"
+            null = pct(k.get("null_p95"))
+            adm = "yes" if k.get("admissible") else f"no: {k.get('reason')}"
+            if k.get("admissible") is None:
+                adm = "—"
+            acc = "**yes**" if k["accepted"] else f"no ({k.get('rejected_by') or 'not tried'})"
             lines.append(
                 f"| {k['effect']} | yes | {k['signature']:.3f} | {pct(k.get('validation_gap'))} | "
-                f"{shr} | {dbic} | {'**yes**' if k['accepted'] else 'no'} | {par} |"
+                f"{shr} | {dbic} | {null} | {adm} | {acc} | {par} |"
             )
         lines += ["", f"Run time: {c['timing']['seconds']:.1f} s.", ""]
         if c.get("figures"):

@@ -171,3 +171,53 @@ def difference_noise_sigma(residual: np.ndarray) -> float:
         return 0.0
     mad = float(np.median(np.abs(d - np.median(d))))
     return 1.4826 * mad / math.sqrt(2.0)
+
+
+def quantisation_step(x: np.ndarray) -> float:
+    """The quantisation step of a sampled signal, 0 when it is not quantised.
+
+    A quantised signal moves by integer multiples of its step `Δ`; the smallest non-zero
+    absolute difference between samples is taken as the candidate (a slow motion crosses
+    single counts) and accepted when at least 99 % of the non-zero differences are within
+    1 % of a multiple of it (sensor noise or floating-point data break this).
+    """
+    d = np.abs(np.diff(np.asarray(x, float)))
+    scale = float(np.max(np.abs(x))) if np.size(x) else 0.0
+    d = d[d > 1e-12 * max(scale, 1e-300)]
+    if d.size < 10:
+        return 0.0
+    step = float(np.min(d))
+    ratio = d / step
+    if ratio.max() > 1e7:
+        return 0.0
+    on_grid = np.abs(ratio - np.round(ratio)) < 0.01
+    return step if float(np.mean(on_grid)) >= 0.99 else 0.0
+
+
+def effective_samples(residual: np.ndarray) -> float:
+    """Effective number of independent samples of an autocorrelated residual,
+    `N_eff = N / τ`, `τ = 1 + 2 Σ ρ_k` its integrated autocorrelation time (summed up
+    to the first non-positive autocorrelation, Geyer's initial positive sequence).
+    An information criterion with `N_eff` in place of `N` does not count correlated
+    samples as independent evidence (Box, Jenkins & Reinsel, *Time Series Analysis*)."""
+    e = np.asarray(residual, dtype=float)
+    e = e - e.mean()
+    n = e.size
+    if n < 4 or not np.any(e):
+        return float(max(n, 1))
+    nfft = 1 << int(math.ceil(math.log2(2 * n)))
+    f = np.fft.rfft(e, nfft)
+    acf = np.fft.irfft(f * np.conj(f), nfft)[:n]
+    acf = acf / acf[0]
+    nonpos = np.nonzero(acf[1:] <= 0.0)[0]
+    k = int(nonpos[0]) + 1 if nonpos.size else n
+    tau = max(1.0, 1.0 + 2.0 * float(np.sum(acf[1:k])))
+    return float(n / tau)
+
+
+def bic_effective(ssr: float, n: int, p: int, n_eff: float) -> float:
+    """BIC with an effective sample size: `N_eff ln(SSR/N) + p ln N_eff`. The log
+    likelihood of `N` correlated samples carries the information of `N_eff` independent
+    ones; with white residuals (`N_eff = N`) this is `bic`."""
+    n_eff = float(min(max(n_eff, 2.0), n))
+    return float(n_eff * math.log(max(ssr, 1e-300) / n) + p * math.log(n_eff))

@@ -31,6 +31,7 @@ Augmentations of the predicted `T_bearing` [°C]:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
@@ -42,10 +43,23 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
+from .. import models
 from ..calibration import fixed, unwrap
 from ..calibration._parametrise import Positive
 from ..data import Record
-from ._base import AbstractEffect, AbstractFamily, Context, EffectSpec, Experiment
+from ._base import (
+    AbstractAdditiveEffect,
+    AbstractEffect,
+    AbstractFamily,
+    AdmissibilityContext,
+    Context,
+    EffectSpec,
+    Experiment,
+    GapModel,
+    NotIdentifiable,
+    check,
+    predict,
+)
 
 __all__ = ["StaticRegression", "ThermalFamily"]
 
@@ -73,10 +87,11 @@ class StaticRegression(eqx.Module):
     use_speed: bool = eqx.field(static=True, default=True)
 
     def __call__(self, d: Mapping[str, Array]) -> Float[Array, " n"]:
-        y = self.coef[0] + self.coef[1] * d["T_chassis"]
-        if self.use_speed:
-            y = y + self.coef[2] * d["v_m"]
-        return y
+        # the library's regression (biases folded into the intercept, see above)
+        cols = [d["T_chassis"]] + ([d["v_m"]] if self.use_speed else [])
+        slopes = self.coef[1:]
+        law = models.BiasFreeRegression(slopes, self.coef[0], jnp.zeros_like(slopes))
+        return law(jnp.stack(cols, axis=-1))
 
     def parameters(self) -> dict[str, float]:
         c = np.asarray(self.coef)
@@ -132,6 +147,7 @@ class Dynamics(AbstractEffect):
     """The bearing temperature lags its static value with a time constant `tau` [s]."""
 
     name: ClassVar[str] = "dynamics"
+    order: ClassVar[int] = 1
     tau: Any  # [s], > 0 when calibrated (log-parametrised); 0 is the nominal model
     dt: float = eqx.field(static=True)
 
@@ -140,22 +156,34 @@ class Dynamics(AbstractEffect):
         # equilibrium); it is taken from the measured target at the first sample.
         return first_order_lag(y, jnp.asarray(self.tau), self.dt, d["y"][0])
 
-    def order(self) -> int:
-        return 1
-
     def constrained(self):
         return eqx.tree_at(lambda e: e.tau, self, replace_fn=_positive)
+
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        tau = _f(self.tau)
+        return check(
+            (np.isfinite(tau), "non-finite time constant"),
+            (tau >= context.record_dt, f"time constant {tau:.3g} s shorter than one sample"),
+            (
+                tau <= context.duration,
+                f"time constant {tau:.3g} s longer than the record ({context.duration:.3g} s): "
+                "not identifiable from it",
+            ),
+        )
 
     def parameters(self):
         return {"tau_s": _f(self.tau)}
 
 
-class _MeasuredTemperature(AbstractEffect):
+class _MeasuredTemperature(AbstractAdditiveEffect):
     """`+ c·(T − bias)` for a measured temperature `T` that reaches the bearing; `bias` is
     the minimum over the calibration data and is never calibrated."""
 
-    signal: ClassVar[str]
-    suffix: ClassVar[str]
+    signal: eqx.AbstractClassVar[str]
+    suffix: eqx.AbstractClassVar[str]
     size: Float[Array, 1]  # [-]
     bias: Any  # [°C]
 
@@ -165,6 +193,19 @@ class _MeasuredTemperature(AbstractEffect):
     def constrained(self):
         return eqx.tree_at(lambda e: e.bias, self, replace_fn=fixed)
 
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        c = _f(self.size[0])
+        return check(
+            (np.isfinite(c), "non-finite coefficient"),
+            (
+                abs(c) <= 1.0,
+                f"coefficient {c:.3g}: a passive heat path cannot amplify a temperature change",
+            ),
+        )
+
     def parameters(self):
         return {f"c_{self.suffix}": _f(self.size[0]), f"bias_{self.suffix}": _f(self.bias)}
 
@@ -173,6 +214,7 @@ class AmbientTemperature(_MeasuredTemperature):
     """`+ c·(T_air − bias)`: the air temperature reaches the bearing through the shaft."""
 
     name: ClassVar[str] = "ambient_temperature"
+    order: ClassVar[int] = 0
     signal: ClassVar[str] = "T_air"
     suffix: ClassVar[str] = "air"
 
@@ -181,6 +223,7 @@ class CoolantTemperature(_MeasuredTemperature):
     """`+ c·(T_water − bias)`: the cooling water reaches the bearing through its jacket."""
 
     name: ClassVar[str] = "coolant_temperature"
+    order: ClassVar[int] = 0
     signal: ClassVar[str] = "T_water"
     suffix: ClassVar[str] = "water"
 
@@ -202,7 +245,7 @@ def equivalent_exponent(c2: float, c3: float) -> float:
     return alpha
 
 
-class SpeedNonlinearity(AbstractEffect):
+class SpeedNonlinearity(AbstractAdditiveEffect):
     """`+ c2·x² + c3·x³`, `x = |v_m| / v_max`: friction heat growing faster than linearly
     with speed (the nominal model holds the linear term).
 
@@ -212,6 +255,7 @@ class SpeedNonlinearity(AbstractEffect):
     better than 1 % of the range. The report gives the equivalent `α`."""
 
     name: ClassVar[str] = "speed_nonlinearity"
+    order: ClassVar[int] = 0
     size: Float[Array, 2]  # c2, c3 [K]
     scale: Any  # v_max [rpm] of the calibration data; never calibrated
 
@@ -221,6 +265,22 @@ class SpeedNonlinearity(AbstractEffect):
 
     def constrained(self):
         return eqx.tree_at(lambda e: e.scale, self, replace_fn=fixed)
+
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        """Friction heat never falls with speed: with the nominal linear term, the speed
+        law `c1·x + c2·x² + c3·x³` (`x = |v|/v_max`) is non-decreasing on [0, 1]."""
+        c2, c3 = (float(c) for c in np.asarray(self.size))
+        c1 = float(context.nominal.get("c_speed", 0.0)) * _f(self.scale)
+        x = np.linspace(0.0, 1.0, 101)
+        slope = c1 + 2 * c2 * x + 3 * c3 * x**2
+        tol = 1e-9 * (abs(c1) + abs(c2) + abs(c3))
+        return check(
+            (np.isfinite(c2) and np.isfinite(c3), "non-finite coefficients"),
+            (bool(np.all(slope >= -tol)), "the heat it adds falls with speed somewhere"),
+        )
 
     def parameters(self):
         c2, c3 = (float(c) for c in np.asarray(self.size))
@@ -310,6 +370,7 @@ class ThermalFamily(AbstractFamily):
     name = "thermal"
     required = ("T_chassis", "T_bearing")
     optional = ("v_m", "T_air", "T_water")
+    option_keys = ("smoothing_s", "speed_change_s")
     target_label = "bearing temperature T_bearing [°C]"
 
     def __init__(self, **options: Any):
@@ -398,10 +459,10 @@ class ThermalFamily(AbstractFamily):
     def nominal(self, experiments: Sequence[Experiment]) -> StaticRegression:
         tc = np.concatenate([e.arrays["T_chassis"] for e in experiments])
         if float(np.ptp(tc)) <= 0:
-            raise ValueError(
-                "diagnose(thermal): T_chassis is constant over the calibration data; the "
-                "regression coefficient is not identifiable. Give experiments in which the "
-                "spindle warms up or cools down."
+            raise NotIdentifiable(
+                "T_chassis is constant over the calibration data: the regression coefficient "
+                "is not identifiable; give experiments in which the spindle warms up or cools "
+                "down"
             )
         use_speed = "v_m" not in self._absent
         v = np.concatenate([e.arrays["v_m"] for e in experiments])
@@ -418,6 +479,56 @@ class ThermalFamily(AbstractFamily):
         # fold the biases into the intercept (see StaticRegression)
         th[0] -= th[1] * self._bias["T_chassis"] + (th[2] * self._bias["v_m"] if use_speed else 0.0)
         return StaticRegression(jnp.asarray(th), use_speed)
+
+    def identifiability(self, experiments: Sequence[Experiment], model: GapModel) -> str | None:
+        """The regression is identified when its regressors are not collinear (the
+        chassis temperature and the speed vary independently enough)."""
+        cols = [np.concatenate([e.arrays["T_chassis"] for e in experiments])]
+        if unwrap(model.nominal).use_speed:
+            cols.append(np.concatenate([e.arrays["v_m"] for e in experiments]))
+        phi = np.stack([c - c.mean() for c in cols], -1)
+        norms = np.linalg.norm(phi, axis=0)
+        if np.any(norms == 0):
+            return "an input of the regression is constant"
+        sv = np.linalg.svd(phi / norms, compute_uv=False)
+        if sv[-1] / sv[0] < 1e-3:
+            return (
+                "the chassis temperature and the speed move together in the record: their "
+                "coefficients cannot be told apart; record different speeds at different "
+                "temperatures"
+            )
+        return None
+
+    def admissibility_context(
+        self, experiments: Sequence[Experiment], model: GapModel
+    ) -> AdmissibilityContext:
+        dt = experiments[0].dt
+        dur = min(e.n * dt for e in experiments)
+        return AdmissibilityContext(
+            record_dt=dt,
+            analysis_dt=dt,
+            band_hz=(2.0 / dur, 0.5 / dt),
+            duration=dur,
+            nominal=unwrap(model.nominal).parameters(),
+        )
+
+    def null_experiments(
+        self,
+        model: GapModel,
+        experiments: Sequence[Experiment],
+        rng: np.random.Generator,
+        count: int,
+    ) -> list[list[Experiment]]:
+        """The calibrated regression on each record's own inputs, plus white noise of the
+        record's noise level (second differences of `T_bearing`)."""
+        out: list[list[Experiment]] = [[] for _ in range(count)]
+        for exp in experiments:
+            clean = predict(model, exp)
+            sigma = math.sqrt(max(exp.noise_var, 0.0))
+            for k in range(count):
+                y = clean + sigma * rng.standard_normal(clean.shape)
+                out[k].append(dataclasses.replace(exp, arrays={**exp.arrays, "y": y}))
+        return out
 
     def nominal_parameters(self, model) -> dict[str, float]:
         """The regression in the study's bias-free form: `c0`, `c_chassis`, `c_speed` and

@@ -33,6 +33,7 @@ Augmentations of the predicted `x_t`:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
@@ -44,12 +45,25 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
-from ..calibration import fit_rational, fixed
+from ..calibration import fit_rational, fixed, unwrap
 from ..calibration._parametrise import Positive
 from ..data import Record
 from ..models import RationalTF
 from ..signal import transmissibility
-from ._base import AbstractEffect, AbstractFamily, Context, EffectSpec, Experiment
+from ._base import (
+    AbstractAdditiveEffect,
+    AbstractEffect,
+    AbstractFamily,
+    AdmissibilityContext,
+    Context,
+    EffectSpec,
+    Experiment,
+    GapModel,
+    NotIdentifiable,
+    check,
+    predict,
+)
+from ._stats import quantisation_step
 
 __all__ = ["StableTMF", "TMFFamily"]
 
@@ -286,9 +300,7 @@ def _positive(x) -> Positive:
     return Positive(jnp.log(jnp.maximum(x, 1e-12)))
 
 
-
-
-class PositionDependence(AbstractEffect):
+class PositionDependence(AbstractAdditiveEffect):
     """TMF coefficients linear in the other axis' position: `B(σ; y) = B₀(σ) + x·ΔB(σ)`,
     `A(σ; y) = A₀(σ) + x·ΔA(σ)` (monic), `x = (y − ȳ)/h` with `ȳ`, `h` the centre and
     half-range of the calibration positions.
@@ -299,6 +311,7 @@ class PositionDependence(AbstractEffect):
     """
 
     name: ClassVar[str] = "position_dependence"
+    order: ClassVar[int] = 0
     size: Float[Array, " p"]  # (ΔB (order + 1), ΔA (order)) per half-range, scaled σ
     centre: Any  # ȳ [m]; never calibrated
     half_range: Any  # h [m]; never calibrated
@@ -315,6 +328,25 @@ class PositionDependence(AbstractEffect):
         # rounding), with the derivative of `diff` kept
         return _exact_zero_at(jnp.all(delta == 0), diff)
 
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        """The TMF stays stable over the measured positions (`x = ±1`)."""
+        s = np.asarray(self.size)
+        nom = context.nominal_model
+        if not np.all(np.isfinite(s)):
+            return False, "non-finite coefficient slopes"
+        if nom is None:
+            return True, None
+        n1 = int(nom.num.shape[0])
+        den = np.asarray(nom.scaled_denominator())
+        for x in (-1.0, 1.0):
+            d = den + np.concatenate([[0.0], x * s[n1:]])
+            if np.any(np.real(np.roots(d)) >= 0):
+                return False, f"the TMF is unstable at the {'lower' if x < 0 else 'upper'} end of y"
+        return True, None
+
     def parameters(self):
         s = np.asarray(self.size)
         return {
@@ -325,10 +357,11 @@ class PositionDependence(AbstractEffect):
         }
 
 
-class MissingMode(AbstractEffect):
+class MissingMode(AbstractAdditiveEffect):
     """A mode in parallel on `x_e`: `(r₁ ω s + r₀ ω²) / (s² + 2ζωs + ω²)`."""
 
     name: ClassVar[str] = "missing_mode"
+    order: ClassVar[int] = 0
     size: Float[Array, 2]  # residue (r0, r1) [-]
     omega: Any  # [rad/s], positive
     zeta: Any  # [-], positive
@@ -343,11 +376,20 @@ class MissingMode(AbstractEffect):
     def constrained(self):
         return eqx.tree_at(lambda e: (e.omega, e.zeta), self, replace_fn=_positive)
 
-    def physical(self) -> bool:
-        """A mode is a resonance inside the sampled band: `ζ < 0.4` and `f < 0.45 fs`.
-        (A heavily damped "mode" above the band only bends the phase, as a delay does.)"""
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        """A mode is a lightly damped resonance (`ζ < 0.3`) up to the Nyquist frequency
+        (a heavily damped "mode" only bends the phase, as a delay does)."""
         f = _f(self.omega) / (2 * math.pi)
-        return bool(_f(self.zeta) < 0.4 and f < 0.45 / self.dt)
+        z = _f(self.zeta)
+        lo, hi = context.band_hz
+        return check(
+            (np.all(np.isfinite(np.asarray(self.size))) and np.isfinite(f), "non-finite mode"),
+            (z < ZETA_MAX, f"damping ratio ζ = {z:.3g}: not a lightly damped mode (< {ZETA_MAX})"),
+            (lo <= f <= hi, f"f = {f:.4g} Hz outside the analysed band [{lo:.3g}, {hi:.4g}] Hz"),
+        )
 
     def parameters(self):
         s = np.asarray(self.size)
@@ -376,24 +418,44 @@ def fft_delay(y: Float[Array, " n"], delay: Float[Array, ""]) -> Float[Array, " 
     return y + _exact_zero_at(delay == 0, out - y)
 
 
+ZETA_MAX = 0.3
+"""Largest damping ratio of a mode (heuristic: above it a mode has no peak left)."""
+
+
 class SensorDelay(AbstractEffect):
     """`x_t` recorded `tau` [s] after the motion it measures (a transport or filter delay)."""
 
     name: ClassVar[str] = "sensor_delay"
+    order: ClassVar[int] = 1
     tau: Float[Array, ""]  # [s]
     dt: float = eqx.field(static=True)
 
     def apply(self, y, d, nominal):
         return fft_delay(y, self.tau / self.dt)
 
-    def order(self) -> int:
-        return 1
+    def constrained(self):
+        return self
+
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        tau = _f(self.tau)
+        return check(
+            (np.isfinite(tau), "non-finite delay"),
+            (tau > 0, f"non-causal delay τ = {1e3 * tau:.3g} ms"),
+            (
+                tau >= context.record_dt * (1 - 1e-9),
+                f"delay τ = {1e3 * tau:.3g} ms shorter than one sample",
+            ),
+            (tau < 0.1 * context.duration, f"delay τ = {tau:.3g} s not short against the record"),
+        )
 
     def parameters(self):
         return {"tau_s": _f(self.tau)}
 
 
-class ProcessForce(AbstractEffect):
+class ProcessForce(AbstractAdditiveEffect):
     """The measured process force `f` moves the tool relative to the encoder through a
     compliance with the structure's poles: `+ g·A(0)·N(σ) / A(σ) · f`, `A` the nominal
     TMF's denominator, `N(σ) = Σ b_i σ^i` the size; the static compliance is `g·b₀` [m/N].
@@ -404,6 +466,7 @@ class ProcessForce(AbstractEffect):
     the TMF's denominator (the structure with the encoder held)."""
 
     name: ClassVar[str] = "process_force"
+    order: ClassVar[int] = 0
     size: Float[Array, " n1"]  # N(σ), highest power first, in units of g
     gain: Any  # g [m/N] = RMS(x_t) / RMS(f) of the calibration data; never calibrated
 
@@ -413,6 +476,14 @@ class ProcessForce(AbstractEffect):
 
     def constrained(self):
         return eqx.tree_at(lambda e: e.gain, self, replace_fn=fixed)
+
+    def extra_dof(self, arrays):
+        return 0
+
+    def admissible(self, context):
+        # the compliance has the structure's own (stable) poles; its numerator is free
+        ok = bool(np.all(np.isfinite(np.asarray(self.size))))
+        return (True, None) if ok else (False, "non-finite compliance numerator")
 
     def parameters(self):
         b = np.asarray(self.size)
@@ -457,17 +528,21 @@ def _t_position(ctx: Context) -> list[AbstractEffect]:
 
 
 def _t_mode(ctx: Context) -> list[AbstractEffect]:
+    """Starts at the residual's spectral peaks, plus one just below the Nyquist frequency:
+    a mode near Nyquist has no resolved peak in a Welch spectrum but still bends the
+    phase and the gain at the top of the band."""
     dt = ctx.experiments[0].dt
+    freqs = _residual_peaks(ctx, 3) + [0.45 / dt]
     return [
         MissingMode(jnp.zeros(2), jnp.asarray(2 * math.pi * fr), jnp.asarray(0.03), dt)
-        for fr in _residual_peaks(ctx, 3)
+        for fr in freqs
     ]
 
 
 def _t_delay(ctx: Context) -> list[AbstractEffect]:
     dt = ctx.experiments[0].dt
     # heuristic: up to ~1.5 samples a delay is absorbed by the TMF's numerator
-    return [SensorDelay(jnp.asarray(k * dt), dt) for k in (1.5, 3.0, 6.0, -2.0)]
+    return [SensorDelay(jnp.asarray(k * dt), dt) for k in (1.5, 3.0, 6.0)]
 
 
 def _t_force(ctx: Context) -> list[AbstractEffect]:
@@ -535,6 +610,7 @@ class TMFFamily(AbstractFamily):
     name = "tmf"
     required = ("x_e", "x_t")
     optional = ("y", "f")
+    option_keys = ("order", "coherence", "fir_taps")
     target_label = "tool-side motion x_t"
 
     def __init__(self, **options: Any):
@@ -559,7 +635,7 @@ class TMFFamily(AbstractFamily):
         xe = np.asarray(record["x_e"], float)
         xt = np.asarray(record["x_t"], float)
         if float(np.ptp(xe)) == 0.0:
-            raise ValueError(
+            raise NotIdentifiable(
                 f"diagnose(tmf): x_e of experiment {name!r} is constant; the TMF is not "
                 "identifiable without motion. Give experiments with excitation."
             )
@@ -597,7 +673,61 @@ class TMFFamily(AbstractFamily):
             noise_var=noise_var,
             signals=frozenset(signals),
             source=record,
+            record_dt=float(record.dt),
+            resolution=quantisation_step(np.asarray(record["x_t"], float)),
         )
+
+    def identifiability(self, experiments: Sequence[Experiment], model: GapModel) -> str | None:
+        """The TMF is identified when the calibrated model explains the tool-side motion
+        better than no model at all (`x_t = 0`); the coherence over the band is checked
+        when the model is initialised."""
+        y = np.concatenate([e.y for e in experiments])
+        r = np.concatenate([e.y - predict(model, e) for e in experiments])
+        if not float(np.sum(r**2)) < float(np.sum(y**2)):
+            return (
+                "the calibrated TMF does not explain the tool-side motion at all: x_t does not "
+                "respond to x_e in the record; excite the axis over the band of interest"
+            )
+        return None
+
+    def admissibility_context(
+        self, experiments: Sequence[Experiment], model: GapModel
+    ) -> AdmissibilityContext:
+        dt = experiments[0].dt
+        dur = min(e.n * dt for e in experiments)
+        nom = unwrap(model.nominal)
+        return AdmissibilityContext(
+            record_dt=dt,
+            analysis_dt=dt,
+            band_hz=(2.0 / dur, 0.5 / dt),
+            resolution=max(e.resolution for e in experiments),
+            duration=dur,
+            nominal=nom.parameters(),
+            nominal_model=nom,
+        )
+
+    def null_experiments(
+        self,
+        model: GapModel,
+        experiments: Sequence[Experiment],
+        rng: np.random.Generator,
+        count: int,
+    ) -> list[list[Experiment]]:
+        """The calibrated TMF driven by each record's own `x_e`, plus white noise of the
+        record's noise level (the FIR-regression residual) and the record's quantisation
+        of `x_t` (a random zero per draw)."""
+        out: list[list[Experiment]] = [[] for _ in range(count)]
+        for exp in experiments:
+            clean = predict(model, exp)
+            sigma = math.sqrt(max(exp.noise_var, 0.0))
+            step = exp.resolution
+            for k in range(count):
+                y = clean + sigma * rng.standard_normal(clean.shape)
+                if step > 0:
+                    phase = rng.uniform(0.0, step)
+                    y = step * np.round((y + phase) / step) - phase
+                out[k].append(dataclasses.replace(exp, arrays={**exp.arrays, "y": y}))
+        return out
 
     def describe_nominal(self) -> str:
         o = self.options["order"]
@@ -628,9 +758,9 @@ class TMFFamily(AbstractFamily):
         if band.sum() < 2 * order + 2:
             band = grid & (coh >= np.quantile(coh[grid], 0.5))
         if band.sum() < 2 * order + 2:
-            raise ValueError(
-                "diagnose(tmf): the encoder and tool signals are not coherent over enough "
-                "frequencies to fit a TMF; check that x_t responds to x_e (same excitation)."
+            raise NotIdentifiable(
+                "the encoder and tool signals are not coherent over enough frequencies to fit "
+                "a TMF; check that x_t responds to x_e (same excitation)"
             )
         # the whole grid with zero weight outside the coherent band: one frequency grid
         # (one compilation of the fit) whatever the band

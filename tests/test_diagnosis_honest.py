@@ -1,0 +1,367 @@
+"""The diagnosis on machines it has never seen: physical admissibility of every effect,
+selection by held-out evidence, the simulated null, and the refusals (DESIGN.md §3.2).
+
+Oracles: the physics rules stated in each effect (hand-built parameter values on both
+sides of each rule), the twins' own settings (encoder step, force noise, controller),
+closed forms (AR(1) correlation time) and hand-built records.
+"""
+
+import json
+import math
+
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+import pytest
+
+import jaxvs
+from jaxvs._cli import main
+from jaxvs.data import Record, save_csv
+from jaxvs.diagnosis._base import AdmissibilityContext
+from jaxvs.diagnosis._drive import (
+    AsymmetricFriction,
+    Backlash,
+    CoulombFriction,
+    ExternalForce,
+    PositionDependence,
+    Resonance,
+    StribeckFriction,
+    TimeDelay,
+    identify_controller,
+)
+from jaxvs.diagnosis._engine import CandidateResult, choose, null_threshold, primary_effect
+from jaxvs.diagnosis._stats import effective_samples, quantisation_step
+from jaxvs.diagnosis._thermal import (
+    AmbientTemperature,
+    CoolantTemperature,
+    Dynamics,
+    SpeedNonlinearity,
+)
+from jaxvs.diagnosis._tmf import (
+    MissingMode,
+    PositionDependence as TMFPositionDependence,
+    ProcessForce,
+    SensorDelay,
+    StableTMF,
+)
+from jaxvs.twins import DriveTwin
+
+# A drive record at 1 kHz analysed up to 100 Hz, 2 µm encoder, 0.2 m of travel.
+DRIVE = AdmissibilityContext(
+    record_dt=1e-3,
+    analysis_dt=2.5e-3,
+    band_hz=(0.2, 100.0),
+    resolution=2e-6,
+    duration=10.0,
+    span=0.2,
+    nominal={"M": 95.0, "Fv": 200.0, "offset": -3.0},
+)
+
+
+def _verdict(effect, context=DRIVE):
+    ok, reason = effect.admissible(context)
+    assert isinstance(ok, bool)
+    assert (reason is None) == ok
+    return ok, reason
+
+
+# ------------------------------------------------------------------------ admissibility
+
+
+def test_friction_levels_must_be_non_negative_with_static_above_coulomb():
+    vs = jnp.asarray(1e-3)
+    assert _verdict(CoulombFriction(jnp.array([20.0]), vs)) == (True, None)
+    ok, why = _verdict(CoulombFriction(jnp.array([-0.5]), vs))
+    assert not ok and "negative Coulomb" in why
+    assert _verdict(AsymmetricFriction(jnp.array([20.0, 12.0, 40.0]), vs))[0]
+    ok, why = _verdict(AsymmetricFriction(jnp.array([20.0, -1.0, 0.0]), vs))
+    assert not ok and "negative direction" in why
+    # ΔFv/2 larger than the nominal Fv = 200: one direction would have negative viscosity
+    ok, why = _verdict(AsymmetricFriction(jnp.array([20.0, 20.0, 450.0]), vs))
+    assert not ok and "viscous" in why
+    v_st = jnp.asarray(0.01)
+    assert _verdict(StribeckFriction(jnp.array([10.0, 25.0]), v_st, vs))[0]
+    ok, why = _verdict(StribeckFriction(jnp.array([10.0, 5.0]), v_st, vs))
+    assert not ok and "Fs" in why
+    ok, why = _verdict(StribeckFriction(jnp.array([-2.0, 5.0]), v_st, vs))
+    assert not ok and "negative Coulomb" in why
+
+
+def test_backlash_gap_above_resolution_and_positive_load():
+    vs, dt = jnp.asarray(1e-3), 2.5e-3
+    good = Backlash(jnp.array([30.0, 10.0, 5.0]), jnp.asarray(50e-6), vs, dt)
+    assert _verdict(good) == (True, None)
+    # total gap 2b = 1 µm is below the 2 µm encoder step
+    ok, why = _verdict(Backlash(jnp.array([30.0, 10.0, 5.0]), jnp.asarray(0.5e-6), vs, dt))
+    assert not ok and "resolution" in why
+    ok, why = _verdict(Backlash(jnp.array([-3.0, 10.0, 5.0]), jnp.asarray(50e-6), vs, dt))
+    assert not ok and "negative load mass" in why
+    ok, why = _verdict(Backlash(jnp.array([300.0, 10.0, 5.0]), jnp.asarray(50e-6), vs, dt))
+    assert not ok and "whole moving mass" in why
+    ok, why = _verdict(Backlash(jnp.array([30.0, -10.0, 5.0]), jnp.asarray(50e-6), vs, dt))
+    assert not ok and "damping" in why
+    # a load carried by friction alone (no inertia behind the gap) is a backlash too
+    assert _verdict(Backlash(jnp.array([0.0, 0.0, 8.0]), jnp.asarray(50e-6), vs, dt))[0]
+    ok, why = _verdict(Backlash(jnp.array([0.0, 0.0, 0.0]), jnp.asarray(50e-6), vs, dt))
+    assert not ok and "neither" in why
+
+
+def test_resonance_lightly_damped_inside_the_band_with_positive_mass():
+    w, dt = jnp.asarray(2 * math.pi * 40.0), 2.5e-3
+    assert _verdict(Resonance(jnp.array([20.0, 0.0]), w, jnp.asarray(0.05), dt))[0]
+    ok, why = _verdict(Resonance(jnp.array([20.0, 0.0]), w, jnp.asarray(0.7), dt))
+    assert not ok and "lightly damped" in why
+    high = jnp.asarray(2 * math.pi * 150.0)  # above the 100 Hz analysis band
+    ok, why = _verdict(Resonance(jnp.array([20.0, 0.0]), high, jnp.asarray(0.05), dt))
+    assert not ok and "band" in why
+    ok, why = _verdict(Resonance(jnp.array([-5.0, 0.0]), w, jnp.asarray(0.05), dt))
+    assert not ok and "mass" in why
+
+
+def test_time_delay_causal_and_at_least_one_sample():
+    dt = 2.5e-3
+    assert _verdict(TimeDelay(jnp.asarray(2e-3), dt)) == (True, None)
+    ok, why = _verdict(TimeDelay(jnp.asarray(-1.9e-3), dt))
+    assert not ok and "non-causal" in why
+    ok, why = _verdict(TimeDelay(jnp.asarray(0.4e-3), dt))  # under the 1 ms sample
+    assert not ok and "one sample" in why
+
+
+def test_position_dependence_and_external_force_rules():
+    good = PositionDependence(jnp.zeros(5), jnp.asarray(0.02), 0.1, 0.1)
+    assert _verdict(good)[0]
+    ok, why = _verdict(PositionDependence(jnp.zeros(5), jnp.asarray(0.5), 0.1, 0.1))
+    assert not ok and "longer than the travel" in why
+    # the amplitudes of unmeasured pulses are profiled on the data: no rule can fail
+    assert _verdict(ExternalForce()) == (True, None)
+
+
+def test_tmf_effects_admissibility():
+    dt = 1e-3
+    ctx = AdmissibilityContext(record_dt=dt, analysis_dt=dt, band_hz=(0.5, 500.0), duration=4.0)
+    w = jnp.asarray(2 * math.pi * 220.0)
+    assert _verdict(MissingMode(jnp.array([0.1, 0.0]), w, jnp.asarray(0.03), dt), ctx)[0]
+    ok, why = _verdict(MissingMode(jnp.array([0.1, 0.0]), w, jnp.asarray(0.6), dt), ctx)
+    assert not ok and "lightly damped" in why
+    above = jnp.asarray(2 * math.pi * 700.0)  # above Nyquist
+    ok, why = _verdict(MissingMode(jnp.array([0.1, 0.0]), above, jnp.asarray(0.03), dt), ctx)
+    assert not ok and "band" in why
+    assert _verdict(SensorDelay(jnp.asarray(3e-3), dt), ctx)[0]
+    ok, why = _verdict(SensorDelay(jnp.asarray(-2e-3), dt), ctx)
+    assert not ok and "non-causal" in why
+    assert _verdict(ProcessForce(jnp.ones(5), jnp.asarray(1e-8)), ctx)[0]
+    ok, why = _verdict(ProcessForce(jnp.array([1.0, np.nan, 0, 0, 0]), jnp.asarray(1e-8)), ctx)
+    assert not ok and "non-finite" in why
+    # position dependence: a slope of the denominator that moves a pole pair across the
+    # imaginary axis at one end of the travel is inadmissible
+    tmf = StableTMF.from_rational(jaxvs.RationalTF([1.0, 0.0, 1e6], [1.0, 60.0, 1e6]), 1000.0, dt)
+    ctx_tmf = AdmissibilityContext(
+        record_dt=dt, analysis_dt=dt, band_hz=(0.5, 500.0), duration=4.0, nominal_model=tmf
+    )
+    # scaled denominator σ² + 0.06σ + 1: a slope 0.1 on the σ coefficient makes it −0.04
+    # at x = −1
+    ok, why = _verdict(TMFPositionDependence(jnp.array([0, 0, 0, 0.1, 0.0]), 0.0, 1.0), ctx_tmf)
+    assert not ok and "unstable" in why
+    small = TMFPositionDependence(jnp.array([0, 0, 0, 0.01, 0.0]), 0.0, 1.0)
+    assert _verdict(small, ctx_tmf)[0]
+
+
+def test_thermal_effects_admissibility():
+    ctx = AdmissibilityContext(
+        record_dt=5.0,
+        analysis_dt=5.0,
+        band_hz=(1e-4, 0.1),
+        duration=36000.0,
+        nominal={"intercept": 20.0, "c_chassis": 1.0, "c_speed": 1e-3},
+    )
+    assert _verdict(Dynamics(jnp.asarray(600.0), 5.0), ctx)[0]
+    ok, why = _verdict(Dynamics(jnp.asarray(1e6), 5.0), ctx)
+    assert not ok and "longer than the record" in why
+    assert _verdict(AmbientTemperature(jnp.array([0.3]), jnp.asarray(20.0)), ctx)[0]
+    ok, why = _verdict(CoolantTemperature(jnp.array([2.5]), jnp.asarray(18.0)), ctx)
+    assert not ok and "passive" in why
+    # nominal slope c1 = 1e-3 K/rpm · 10 000 rpm = 10 K; c2 = −20 K makes the total heat
+    # fall with speed above x = 0.25
+    assert _verdict(SpeedNonlinearity(jnp.array([3.0, 1.0]), jnp.asarray(1e4)), ctx)[0]
+    ok, why = _verdict(SpeedNonlinearity(jnp.array([-20.0, 0.0]), jnp.asarray(1e4)), ctx)
+    assert not ok and "falls with speed" in why
+
+
+# ------------------------------------------------------------------------ selection
+
+
+def _cand(name, before, after, dbic, extends=None):
+    return CandidateResult(
+        name, True, gap_before=before, validation_gap=after, delta_bic=dbic, extends=extends
+    )
+
+
+def test_selection_by_held_out_reduction_not_calibration_bic():
+    # a large calibration ΔBIC with a small held-out gain loses to the larger held-out gain
+    a = _cand("resonance", 0.10, 0.09, 5000.0)
+    b = _cand("coulomb_friction", 0.10, 0.05, 200.0)
+    assert choose([a, b], []) is b
+    # marginality: the base before its extension when both pass, even if the extension
+    # gains more; once the base is in, the extension may follow
+    base = _cand("coulomb_friction", 0.10, 0.06, 100.0)
+    ext = _cand("stribeck_friction", 0.10, 0.04, 300.0, extends="coulomb_friction")
+    assert choose([ext, base], []) is base
+    assert choose([ext], ["coulomb_friction"]) is ext
+
+
+def test_primary_is_the_effect_explaining_most_of_the_held_out_gap():
+    cands = {
+        "time_delay": CandidateResult("time_delay", True, explained=0.01),
+        "resonance": CandidateResult("resonance", True, explained=0.08),
+    }
+    assert primary_effect(["time_delay", "resonance"], cands) == "resonance"
+    assert primary_effect([], cands) is None
+
+
+# ------------------------------------------------------------------------ statistics
+
+
+def test_null_threshold_is_the_quantile_or_the_bonferroni_normal_tail():
+    # Oracle: scipy's normal quantile. Gains of mean 1, sd 0.5 from 19 null records; with 8
+    # candidates tested the tail level is 1 − 0.05/8, z = 2.4977 (the normal tail beats the
+    # empirical 95th percentile of so few draws)
+    rng = np.random.default_rng(3)
+    g = rng.standard_normal(19)
+    g = 1.0 + 0.5 * (g - g.mean()) / g.std(ddof=1)
+    assert null_threshold(g, 0.95, 8) == pytest.approx(1.0 + 0.5 * 2.497705, rel=1e-5)
+    # one candidate: at least the empirical 95th percentile
+    assert null_threshold(g, 0.95, 1) >= np.quantile(g, 0.95)
+    assert null_threshold([0.1], 0.95, 1) == np.inf  # a null of one record decides nothing
+
+
+def test_effective_samples_of_ar1_follow_correlation_time():
+    # AR(1) with φ = 0.8: τ = (1 + φ)/(1 − φ) = 9, so N_eff = N/9 (sampling error ~10 %)
+    rng = np.random.default_rng(0)
+    n, phi = 40_000, 0.8
+    e = np.empty(n)
+    e[0] = 0.0
+    w = rng.standard_normal(n)
+    for i in range(1, n):
+        e[i] = phi * e[i - 1] + w[i]
+    assert effective_samples(e) == pytest.approx(n / 9, rel=0.15)
+    assert effective_samples(w) == pytest.approx(n, rel=0.05)
+
+
+def test_quantisation_step_of_the_twin_encoder():
+    rec = DriveTwin(resolution=2e-6).experiment(jr.key(0), duration=2.0)
+    # the twin quantises to 2 µm exactly (floating-point rounding only)
+    assert quantisation_step(np.asarray(rec["q"])) == pytest.approx(2e-6, rel=1e-6)
+    noisy = np.asarray(rec["q"]) + 1e-7 * np.random.default_rng(1).standard_normal(len(rec))
+    assert quantisation_step(noisy) == 0.0
+
+
+def test_controller_of_the_twin_is_identified():
+    twin = DriveTwin(resolution=1e-6)
+    rec = twin.experiment(jr.key(2), duration=4.0, noise_u=1.0)
+    q, u, r = (np.asarray(rec[k]) for k in ("q", "u", "r"))
+    _, r2, sigma = identify_controller(q, u, r, rec.dt, 16)
+    # the twin's loop is linear in (r, quantised q) with a first-order velocity filter
+    # (pole 0.28 at 1 kHz, inside 16 taps): everything but the 1 N force noise is explained
+    assert r2 > 0.99
+    assert sigma == pytest.approx(1.0, rel=0.1)  # the twin's noise_u, 10 % sampling error
+
+
+# ------------------------------------------------------------------------ the null
+
+
+@pytest.mark.slow
+def test_null_rejects_a_pipeline_artefact_on_effect_free_closed_loop_data():
+    """The effect-free drive twin with a coarse 2 µm encoder and its digital controller:
+    the rigid model's gap is several times the white-noise floor (quantisation, velocity
+    estimate and loop are not white noise), and a flexible candidate fits part of it. The
+    simulated null carries the same artefact: the floor is the gap, nothing is accepted,
+    and the candidate that passed the other tests fails on the null."""
+    k1, k2, k3 = jr.split(jr.key(5), 3)
+    twin = DriveTwin(resolution=2e-6).perturb(k1, 0.1)
+    cal, val = twin.experiment(k2, duration=10.0), twin.experiment(k3, duration=5.0)
+    rep = jaxvs.diagnose(cal, val, family="drive", max_effects=1, n_null=9)
+    assert rep.verdict["effects"] == [] and rep.verdict["primary"] is None
+    g = rep.gap
+    assert g["validation"] > 2 * g["noise_floor_white"]  # not white noise
+    # the null floor is the gap of an adequate model: within 25 % (record-to-record spread)
+    assert g["noise_floor"] == pytest.approx(g["validation"], rel=0.25)
+    nulled = {c["effect"]: c for c in rep.candidates if c["null_p95"] is not None}
+    # the flexible resonance fits part of the artefact (admissible, significant on the
+    # held-out record, ΔBIC in the thousands) and only the null stops it
+    assert "resonance" in nulled and nulled["resonance"]["delta_bic"] > 100
+    for c in nulled.values():
+        assert "null" in c["rejected_by"]
+        assert c["validation_gap_before"] - c["validation_gap"] <= c["null_threshold"]
+        assert c["null_threshold"] >= c["null_p95"]
+    for c in rep.candidates:
+        assert not c["accepted"]
+        if c["admissible"] is False:
+            assert c["reason"] and c["rejected_by"].startswith("inadmissible")
+
+
+# ------------------------------------------------------------------------ refusals
+
+
+def _rec(q, u, dt=1e-3, r=None):
+    sig = {"q": np.asarray(q, float), "u": np.asarray(u, float)}
+    if r is not None:
+        sig["r"] = np.asarray(r, float)
+    return Record(sig, dt=dt)
+
+
+def test_not_identifiable_records_get_no_verdict():
+    n = 6000
+    t = np.arange(n) * 1e-3
+    # one direction only: a slow ramp under a constant force
+    ramp = _rec(0.01 * t, np.full(n, 30.0))
+    rep = jaxvs.diagnose(ramp, family="drive")
+    assert rep.verdict is None
+    assert "one direction" in rep["not_identifiable"]
+    # a constant position: no motion at all
+    still = _rec(np.zeros(n), 5.0 + np.random.default_rng(0).standard_normal(n))
+    rep = jaxvs.diagnose(still, family="drive")
+    assert rep.verdict is None and "no motion" in rep["not_identifiable"]
+    assert "Not identifiable" in rep.to_markdown()
+    # back and forth, but a force unrelated to the motion (constant plus noise): the mass
+    # is not determined
+    q = 0.05 * np.sin(2 * np.pi * 0.5 * t)
+    flat = _rec(q, 10.0 + np.random.default_rng(1).standard_normal(n))
+    rep = jaxvs.diagnose(flat, family="drive")
+    assert rep.verdict is None
+    assert "mass" in rep["not_identifiable"]
+
+
+def test_bad_options_are_refused():
+    rec = DriveTwin().experiment(jr.key(0), duration=2.0)
+    with pytest.raises(ValueError, match="max_effects must be an integer >= 1"):
+        jaxvs.diagnose(rec, family="drive", max_effects=0)
+    with pytest.raises(ValueError, match="max_effects"):
+        jaxvs.diagnose(rec, family="drive", max_effects=-1)
+    with pytest.raises(ValueError, match=r"unknown option\(s\) \['cutof_hz'\]"):
+        jaxvs.diagnose(rec, family="drive", cutof_hz=50.0)
+    with pytest.raises(ValueError, match="n_null"):
+        jaxvs.diagnose(rec, family="drive", n_null=1)
+    fast = DriveTwin().experiment(jr.key(1), duration=2.0, dt=5e-4)
+    with pytest.raises(ValueError, match="share one sampling rate"):
+        jaxvs.diagnose(rec, fast, family="drive")
+
+
+def test_cli_user_errors_and_not_identifiable_exit_codes(tmp_path, capsys):
+    rec = DriveTwin().experiment(jr.key(0), duration=2.0)
+    save_csv(rec, tmp_path / "cal.csv")
+    base = ["diagnose", str(tmp_path / "cal.csv"), "--family", "drive", "--out", str(tmp_path)]
+    for extra in (["--max-effects", "0"], ["--option", "nonsense=3"], ["--option", "novalue"]):
+        assert main(base + extra + ["--quiet", "--no-figures"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("jaxvs: error: ")
+    n = 6000
+    t = np.arange(n) * 1e-3
+    save_csv(_rec(0.01 * t, np.full(n, 30.0)), tmp_path / "ramp.csv")
+    out = tmp_path / "ramp"
+    rc = main(
+        ["diagnose", str(tmp_path / "ramp.csv"), "--family", "drive", "--out", str(out)]
+        + ["--quiet", "--no-figures"]
+    )
+    assert rc == 3
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["verdict"] is None and "one direction" in rep["not_identifiable"]
