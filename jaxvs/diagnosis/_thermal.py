@@ -44,8 +44,7 @@ import scipy.signal as ss
 from jaxtyping import Array, Float
 
 from .. import models
-from ..calibration import fixed, unwrap
-from ..calibration._parametrise import Positive
+from ..calibration import Positive, fixed, unwrap
 from ..data import Record
 from ._base import (
     AbstractAdditiveEffect,

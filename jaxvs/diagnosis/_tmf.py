@@ -45,8 +45,7 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
-from ..calibration import fit_rational, fixed, unwrap
-from ..calibration._parametrise import Positive
+from ..calibration import Positive, fit_rational, fixed, unwrap
 from ..data import Record
 from ..models import RationalTF
 from ..signal import transmissibility
