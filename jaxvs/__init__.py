@@ -12,6 +12,7 @@ from . import (
     diagnosis as diagnosis,
     models as models,
     signal as signal,
+    studies as studies,
 )
 from ._io import (
     FORMAT_VERSION as FORMAT_VERSION,
@@ -75,5 +76,6 @@ from .models import (
     to_scipy as to_scipy,
     zeros as zeros,
 )
+from .studies.design import DesignReport as DesignReport, design as design
 
 __version__ = "0.1.0"
