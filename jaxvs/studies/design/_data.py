@@ -53,7 +53,7 @@ class Prepared(NamedTuple):
     - `y`: `(time,)` target of all experiments concatenated (sparse targets resampled).
     - `measured`: `(time,)` bool, where the target was really measured (scored there).
     - `role`: `(time,)` 0 training, 1 stopping (early stopping, input selection), 2
-      held out (validation: only the final ranking sees it).
+      held out (validation: only the final ranking sees it), -1 warm-up (unused).
     - `starts`: `(time,)` bool, first sample of each experiment.
     - `segments`: `(time,)` int, segment (constant operating point) index per sample.
     - `sparse`: a description of the resampling, or `None` for a dense target.
@@ -288,13 +288,17 @@ def prepare(
     target_samples: Any = None,
     holdout: float = 0.3,
     stop_fraction: float = 0.2,
+    warmup: float = 0.05,
 ) -> Prepared:
     """Read the experiments, check them, resample a sparse target, and split.
 
     Held out (role 2): the `validation` experiments; else, with several experiments, the
     last one; else the last `holdout` share of the record as one contiguous block. Within
     the calibration data the last `stop_fraction` of each experiment is the stopping
-    block (role 1: early stopping and input selection); never random samples.
+    block (role 1: early stopping and input selection); never random samples. The first
+    `warmup` share of each experiment (role -1) is neither trained on nor scored: dynamic
+    designs start in equilibrium with their first input sample, which a record starting
+    from a cold machine is not.
     """
     if not isinstance(target, str) or not target:
         raise TypeError("design: target must be the target signal's name, e.g. 'T_bearing'.")
@@ -407,6 +411,7 @@ def prepare(
         c = sl[role[sl] != 2]
         if c.size:
             role[c[int(round((1 - stop_fraction) * c.size)) :]] = 1
+        role[sl[: int(math.ceil(warmup * sl.size))]] = -1
     n_train = int(np.sum(meas & (role == 0)))
     if n_train < _MIN_SAMPLES or np.sum(meas & (role == 2)) < 10 or np.sum(role == 1) < 5:
         raise ValueError(

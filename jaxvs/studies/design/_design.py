@@ -125,6 +125,7 @@ def design(
     validation: Any = None,
     budget: float | None = None,
     target_samples: Any = None,
+    warmup: float = 0.05,
     max_inputs: int = 4,
     max_delay: int = 2,
     hidden: Sequence[int] = (3, 6, 10, 15),
@@ -156,6 +157,8 @@ def design(
       covered. `None`: no limit.
     - `target_samples`: sparse target samples kept apart: a file (columns `t` and the
       target) or a pair `(t [s], values)`; matched to the experiments by time.
+    - `warmup`: share of each experiment at its start that is neither trained on nor
+      scored (dynamic designs start in equilibrium with the first input sample).
     - `max_inputs`: size of the input pool (forward-selected inputs, then the best
       rejected ones); every non-empty subset of it is searched.
     - `max_delay`: largest input delay [samples]; delay sets `(0,)`, `(0, 1)`, ...,
@@ -318,7 +321,8 @@ def design(
             "selected": [names[i] for i in pool[: sum(s["accepted"] for s in steps)]],
             "pool": [names[i] for i in pool],
             "model": "least squares on first-order-lag-filtered inputs (time constant "
-            "profiled, static included), scored on the stopping block",
+            "profiled, static included), scored by 4-fold blocked cross-validation on the "
+            "calibration data",
         },
         "data": {
             "experiments": len(prep.experiments),
@@ -342,9 +346,13 @@ def _group(c: Candidate) -> str:
 
 
 def _score_and_rank(done, prep, names, pool, dmax, dt, norm, seed):
-    y, role, meas = prep.y, prep.role, prep.measured
+    role, meas = prep.role, prep.measured
+    # scored against the measurements themselves (a sparse target's resampled values
+    # between and at the measurements are only used for training)
+    raw = np.concatenate([e.target for e in prep.experiments])
+    y = np.where(meas, raw, prep.y)
     V = (role == 2) & meas
-    C = (role != 2) & meas
+    C = ((role == 0) | (role == 1)) & meas
     notes: list[str] = []
     ok = [i for i, d in enumerate(done) if d[3] == "ok" and np.all(np.isfinite(d[1][V]))]
     if not ok:
@@ -452,7 +460,7 @@ def _arrays(prep) -> dict[str, np.ndarray]:
 
 def _baseline(prep, names) -> dict:
     """Static regression on the single input most correlated with the target."""
-    T = (prep.role != 2) & prep.measured
+    T = (prep.role == 0) & prep.measured
     V = (prep.role == 2) & prep.measured
     y = prep.y
     best, best_r = None, -1.0

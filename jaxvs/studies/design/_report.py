@@ -190,7 +190,9 @@ class DesignReport:
                 f"{'yes' if r.get('selected') else 'pool' if r.get('in_pool') else ''} |"
             )
         lines.append("")
-        lines.append("Forward selection (stopping-block RMSE, normalised target):")
+        lines.append(
+            "Forward selection (blocked cross-validation RMSE on the calibration data, normalised target):"
+        )
         lines.append("")
         for k, s in enumerate(c["forward_selection"]["steps"], start=1):
             lines.append(

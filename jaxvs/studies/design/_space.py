@@ -2,7 +2,8 @@
 study's relevance/redundancy criterion), greedy forward selection with held-out scoring,
 and the enumeration of candidate designs.
 
-Forward selection scores a subset by the stopping-block error of a cheap linear model
+Forward selection scores a subset by the blocked cross-validation error (contiguous
+folds of the calibration data) of a cheap linear model
 that can follow the thermal dynamics: least squares on the inputs filtered by a
 first-order lag, the time constant profiled on a grid that includes the static case. An
 input joins only when it lowers that held-out error by at least 1 % and significantly
@@ -89,38 +90,46 @@ def forward_selection(
     dt: float,
     *,
     max_inputs: int,
+    folds: int = 4,
     seed: int = 0,
 ) -> tuple[list[int], list[dict]]:
-    """Greedy forward selection of inputs scored on the stopping block.
+    """Greedy forward selection of inputs scored by blocked cross-validation on the
+    calibration data (`folds` contiguous blocks; the held-out data are never used).
 
     **Returns:** `(pool, steps)`: input indices (the selected ones in the order chosen,
     then the best rejected ones, up to `max_inputs`), and per step the stopping-block RMSE
     of every tried input and whether the best was accepted.
     """
-    T = role == 0
-    S = (role == 1) & measured
-    n_T = int(T.sum())
-    tau = np.geomspace(2 * dt, max(n_T * dt / 2, 4 * dt), 16)
+    cal = np.flatnonzero((role == 0) | (role == 1))
+    n_T = int(np.sum(role == 0))
+    tau = np.geomspace(2 * dt, max(n_T * dt / 2, 4 * dt), 40)
     a_grid = np.concatenate([[0.0], np.exp(-dt / tau)])
-    Z = _lag_bank(U, starts, a_grid)  # (grid, time, input)
-    ZT, ZS, yT, yS = Z[:, T], Z[:, S], y[T], y[S]
+    Z = _lag_bank(U, starts, a_grid)[:, cal]  # (grid, calibration sample, input)
+    yc, mc = y[cal], measured[cal]
+    # contiguous folds of the calibration samples (blocked cross-validation)
+    fold = np.minimum((np.arange(cal.size) * folds) // cal.size, folds - 1)
+    scored = mc
 
     def score(sub: list[int]) -> tuple[float, np.ndarray]:
-        best_sse, best_e = np.inf, None
-        for g in range(a_grid.size):
-            A = np.column_stack([ZT[g][:, sub], np.ones(n_T)])
-            w, *_ = np.linalg.lstsq(A, yT, rcond=None)
-            sse = np.sum((A @ w - yT) ** 2)
-            if sse < best_sse:
-                best_sse = sse
-                best_e = np.column_stack([ZS[g][:, sub], np.ones(ZS.shape[1])]) @ w - yS
-        return float(np.sqrt(np.mean(best_e**2))), best_e
+        e = np.empty(cal.size)
+        for k in range(folds):
+            tr, te = fold != k, fold == k
+            best_sse, best_w, best_g = np.inf, None, 0
+            for g in range(a_grid.size):
+                A = np.column_stack([Z[g][tr][:, sub], np.ones(int(tr.sum()))])
+                w, *_ = np.linalg.lstsq(A, yc[tr], rcond=None)
+                sse = np.sum((A @ w - yc[tr]) ** 2)
+                if sse < best_sse:
+                    best_sse, best_w, best_g = sse, w, g
+            e[te] = np.column_stack([Z[best_g][te][:, sub], np.ones(int(te.sum()))]) @ best_w
+        e = (e - yc)[scored]
+        return float(np.sqrt(np.mean(e**2))), e
 
     chosen: list[int] = []
-    current = yS - yT.mean()
+    current = (yc - yc.mean())[scored]
     cur_rmse = float(np.sqrt(np.mean(current**2)))
     steps: list[dict] = []
-    usable = [j for j in range(U.shape[1]) if np.ptp(U[T, j]) > 0]
+    usable = [j for j in range(U.shape[1]) if np.ptp(U[cal, j]) > 0]
     last_tried: dict[int, float] = {}
     block = block_length(current)
     while len(chosen) < max_inputs:
