@@ -191,7 +191,8 @@ class DesignReport:
             )
         lines.append("")
         lines.append(
-            "Forward selection (blocked cross-validation RMSE on the calibration data, normalised target):"
+            "Forward selection (blocked cross-validation RMSE on the calibration data, "
+            "normalised target):"
         )
         lines.append("")
         for k, s in enumerate(c["forward_selection"]["steps"], start=1):
