@@ -52,8 +52,10 @@ def test_regression_group_matches_lstsq():
     rng = np.random.default_rng(0)
     n, m, dmax = 200, 3, 1
     U = rng.normal(size=(n, m * (dmax + 1)))
+    U = np.column_stack([U, U[:, :: dmax + 1] ** 2])  # delayed copies, then squares
     y = U @ rng.normal(size=U.shape[1]) + 0.1 * rng.normal(size=n)
     cands = [Candidate("regression", s, (0,)) for s in [(0,), (1, 2), (0, 1, 2)]]
+    cands.append(Candidate("regression", (0, 2), (0,), quadratic=True))
     train = np.ones(n)
     train[150:] = 0
     res = fit_linear_group("regression", cands, U, y, np.eye(1, n, 0, bool)[0], train, m, dmax, 1.0)
@@ -77,9 +79,8 @@ def test_lag_recovers_time_constant_and_arx_core_matches_lfilter():
     starts = np.zeros(u.size, bool)
     starts[0] = True
     train = np.ones(u.size)
-    res = fit_linear_group(
-        "lag", [Candidate("lag", (0,), (0,))], u[:, None], y, starts, train, 1, 0, dt
-    )
+    X = np.column_stack([u, u**2])
+    res = fit_linear_group("lag", [Candidate("lag", (0,), (0,))], X, y, starts, train, 1, 0, dt)
     tau_hat = -dt / np.log(res.params[0]["a"])
     # the time constant is profiled on a geometric grid of ratio ~1.17: within 10 %
     assert abs(tau_hat / tau - 1) < 0.1

@@ -44,7 +44,7 @@ __all__ = ["design"]
 
 
 def _n_params(c: Candidate) -> int:
-    k = len(c.subset) * len(c.delays)
+    k = len(c.subset) * len(c.delays) + (len(c.subset) if c.quadratic else 0)
     if c.structure == "regression":
         return k + 1
     if c.structure == "lag":
@@ -55,18 +55,22 @@ def _n_params(c: Candidate) -> int:
     return h * (k + 1) + h + 1
 
 
-def _columns(c: Candidate, dmax: int) -> tuple[list[int], tuple[tuple[int, int], ...]]:
+def _columns(c: Candidate, dmax: int, n_pool: int) -> tuple[list[int], tuple[tuple[int, int], ...]]:
     """Active padded-feature indices and the compact `(subset position, delay)` columns."""
     idx, cols = [], []
     for pos, i in enumerate(c.subset):
         for d in c.delays:
             idx.append(i * (dmax + 1) + d)
             cols.append((pos, d))
+    if c.quadratic:
+        for pos, i in enumerate(c.subset):
+            idx.append(n_pool * (dmax + 1) + i)
+            cols.append((pos, -1))
     return idx, tuple(cols)
 
 
 def _sensor(c: Candidate, params: dict, dmax: int, names, target, dt, norm) -> DesignedSensor:
-    idx, cols = _columns(c, dmax)
+    idx, cols = _columns(c, dmax, len(names))
     f = jnp.result_type(float)
     if c.structure == "regression":
         core = LinearCore(jnp.asarray(params["w"][idx], f), jnp.asarray(params["b"], f))
@@ -135,6 +139,7 @@ def design(
     max_steps: int = 100,
     seed: int = 0,
     progress: bool | None = None,
+    compare_loop: bool = False,
 ) -> DesignReport:
     """Search inputs, delays and model structures for a virtual sensor of `target`, and
     rank the designs on held-out data (DESIGN.md §3.4).
@@ -171,6 +176,9 @@ def design(
       block inside the calibration data ends most earlier).
     - `seed`: initialisations and bootstrap; `progress`: progress bar (default: on a
       terminal).
+    - `compare_loop`: for benchmarks: also fit every group one candidate after another
+      with the same compiled trainer and record both times in `timing.groups` (more than
+      doubles the run time).
 
     **Returns:**
 
@@ -233,6 +241,7 @@ def design(
         n_pool, structures=structures, hidden=hidden, delay_sets=delay_sets
     )
     columns = [(i, d) for i in range(n_pool) for d in range(dmax + 1)]
+    columns += [(i, -1) for i in range(n_pool)]  # squares (quadratic linear designs)
     X = delayed_features(Un[:, pool], starts, columns)
     total = sum(len(v) for v in groups.values())
     done: list[tuple[Candidate, np.ndarray, dict, str, float]] = []
@@ -277,18 +286,41 @@ def design(
                 h = cands[0].hidden
                 rate = (res.run_seconds + res.compile_seconds) / (res.members * h * (h + 1) / 2)
             else:
-                res = fit_linear_group(
-                    gname, cands, X, yn, starts, (T).astype(float), n_pool, dmax, dt
+                lin = (X, yn, starts, T.astype(float), n_pool, dmax, dt)
+                res = fit_linear_group(gname, cands, *lin)
+                if compare_loop:  # run again: the first call included the compilation
+                    again = fit_linear_group(gname, cands, *lin)
+                    res = res._replace(
+                        run_seconds=again.run_seconds,
+                        compile_seconds=max(res.run_seconds - again.run_seconds, 0.0),
+                    )
+            entry = {
+                "group": gname,
+                "candidates": len(cands),
+                "members": res.members,
+                "run_s": res.run_seconds,
+                "compile_s": res.compile_seconds,
+            }
+            if compare_loop:
+                entry.update(
+                    _loop_reference(
+                        gname,
+                        cands,
+                        X,
+                        yn,
+                        role,
+                        starts,
+                        T,
+                        n_pool,
+                        dmax,
+                        dt,
+                        inits,
+                        jr.fold_in(key, gi),
+                        max_steps,
+                        res,
+                    )
                 )
-            timing.append(
-                {
-                    "group": gname,
-                    "candidates": len(cands),
-                    "members": res.members,
-                    "run_s": res.run_seconds,
-                    "compile_s": res.compile_seconds,
-                }
-            )
+            timing.append(entry)
             per_c = (res.run_seconds + res.compile_seconds) / max(len(cands), 1)
             for c, p, prm, st in zip(cands, res.pred, res.params, res.status):
                 done.append((c, y_off + y_sc * p, prm, st, per_c))
@@ -341,6 +373,29 @@ def design(
     return DesignReport(content=content, **extras)
 
 
+def _loop_reference(
+    gname, cands, X, yn, role, starts, T, n_pool, dmax, dt, inits, key, max_steps, res
+) -> dict:
+    """Train the same candidates one after another with the same compiled trainer (the
+    peer of the vectorised search, timed in the same process on the same data)."""
+    if gname.startswith("network"):
+        loop = train_network_group(
+            cands, X, yn, role, n_pool, dmax, inits=inits, key=key, max_steps=max_steps, loop=True
+        )
+        diff = float(np.nanmax(np.abs(loop.pred - res.pred))) if len(cands) else 0.0
+        return {
+            "loop_run_s": loop.run_seconds,
+            "loop_compile_s": loop.compile_seconds,
+            "loop_max_prediction_difference": diff,
+        }
+    lin = (X, yn, starts, T.astype(float), n_pool, dmax, dt)
+    first = fit_linear_group(gname, cands[:1], *lin)  # compiles the one-candidate shape
+    t0 = time.perf_counter()
+    for c in cands:
+        fit_linear_group(gname, [c], *lin)
+    return {"loop_run_s": time.perf_counter() - t0, "loop_compile_s": first.run_seconds}
+
+
 def _group(c: Candidate) -> str:
     return f"network h={c.hidden}" if c.hidden is not None else c.structure
 
@@ -387,6 +442,7 @@ def _score_and_rank(done, prep, names, pool, dmax, dt, norm, seed):
             "inputs": sub,
             "delays": {n: list(c.delays) for n in sub},
             "hidden": c.hidden,
+            "quadratic": bool(c.quadratic),
             "validation": val,
             "calibration": _metrics(y[C], pred[C]),
             "parameters": int(params[k]),

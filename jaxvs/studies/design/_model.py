@@ -111,12 +111,13 @@ class NetworkCore(AbstractDesignCore):
 
 def delayed_features(U: np.ndarray, starts: np.ndarray, columns) -> np.ndarray:
     """`(time, feature)` delayed copies `U[k - d, i]` for `(i, d)` in `columns`, each
-    experiment (from a `starts` sample on) held at its first value before it began."""
+    experiment (from a `starts` sample on) held at its first value before it began; `d =
+    -1` denotes the square `U[k, i]²`."""
     n = U.shape[0]
     first = np.maximum.accumulate(np.where(starts, np.arange(n), 0))
     out = np.empty((n, len(columns)), U.dtype)
     for c, (i, d) in enumerate(columns):
-        out[:, c] = U[np.maximum(np.arange(n) - d, first), i]
+        out[:, c] = U[:, i] ** 2 if d < 0 else U[np.maximum(np.arange(n) - d, first), i]
     return out
 
 
@@ -126,7 +127,8 @@ class DesignedSensor(eqx.Module):
     **Fields:**
 
     - `inputs`: the input signal names, in order; `target`: the target's name.
-    - `columns`: `((input index, delay [samples]), ...)`, the features in order.
+    - `columns`: `((input index, delay [samples]), ...)`, the features in order; delay
+      `-1` is the square of the (normalised) input.
     - `structure`: one of `"regression"`, `"lag"`, `"arx"`, `"mlp"`, `"tdnn"`.
     - `dt`: sampling period the delays and dynamics refer to [s].
     - `u_offset`, `u_scale`: `(input,)` normalisation `(u - offset) / scale`;
@@ -152,7 +154,8 @@ class DesignedSensor(eqx.Module):
     def delays(self) -> dict[str, list[int]]:
         out: dict[str, list[int]] = {n: [] for n in self.inputs}
         for i, d in self.columns:
-            out[self.inputs[i]].append(int(d))
+            if d >= 0:
+                out[self.inputs[i]].append(int(d))
         return out
 
     def _matrix(self, data: Any) -> np.ndarray:

@@ -47,13 +47,13 @@ def _fmt(v: Any, nd: int = 4) -> str:
 
 def _describe(d: dict) -> str:
     delays = ", ".join(f"{k}{list(v) if list(v) != [0] else ''}" for k, v in d["delays"].items())
-    extra = ""
+    extra = ", quadratic" if d.get("quadratic") else ""
     if d.get("hidden"):
         extra = f", {d['hidden']} hidden"
     if d.get("order"):
-        extra = f", order {d['order']}"
+        extra += f", order {d['order']}"
     if d.get("time_constant_s"):
-        extra = f", τ = {d['time_constant_s']:.4g} s"
+        extra += f", τ = {d['time_constant_s']:.4g} s"
     return f"{d['structure']} ({delays}{extra})"
 
 

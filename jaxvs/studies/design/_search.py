@@ -36,13 +36,16 @@ __all__ = ["Candidate", "GroupResult", "fit_linear_group", "train_network_group"
 
 class Candidate(NamedTuple):
     """One design: `structure`, `subset` (indices into the input pool), `delays` (the
-    delays [samples] of every chosen input), `hidden` (networks) and `na` (ARX order)."""
+    delays [samples] of every chosen input), `hidden` (networks), `na` (ARX order) and
+    `quadratic` (linear structures: the squares `u_i(k)²` of the chosen inputs join the
+    features, a Hammerstein-type static nonlinearity such as friction heat `∝ n^α`)."""
 
     structure: str
     subset: tuple[int, ...]
     delays: tuple[int, ...]
     hidden: int | None = None
     na: int | None = None
+    quadratic: bool = False
 
 
 class GroupResult(NamedTuple):
@@ -58,11 +61,15 @@ class GroupResult(NamedTuple):
     members: int
 
 
-def feature_mask(c: Candidate, n_pool: int, dmax: int) -> np.ndarray:
+def feature_mask(c: Candidate, n_pool: int, dmax: int, squares: bool = True) -> np.ndarray:
+    """Mask of the padded features `[u_i(k-d) for i, d] + [u_i(k)² for i]` (the squares
+    only with `squares=True`)."""
     m = np.zeros((n_pool, dmax + 1))
+    q = np.zeros(n_pool)
     for i in c.subset:
         m[i, list(c.delays)] = 1.0
-    return m.ravel()
+        q[i] = 1.0 if c.quadratic else 0.0
+    return np.concatenate([m.ravel(), q]) if squares else m.ravel()
 
 
 def _solve(G, r, mask, ridge):
@@ -150,8 +157,9 @@ def fit_linear_group(
 ) -> GroupResult:
     """Fit all candidates of one linear structure (`regression`, `lag` or `arx`) at once.
 
-    `X` `(time, pool·(dmax+1))` normalised padded features, `y` normalised target,
-    `starts` experiment starts, `train` `(time,)` 1.0 on training samples."""
+    `X` `(time, pool·(dmax+2))` normalised padded features (delayed copies, then
+    squares), `y` normalised target, `starts` experiment starts, `train` `(time,)` 1.0 on
+    training samples."""
     masks = jnp.asarray(np.stack([feature_mask(c, n_pool, dmax) for c in cands]))
     Xj, yj, sj, tj = (jnp.asarray(v) for v in (X, y, starts, train.astype(float)))
     ridge = 1e-10
@@ -249,13 +257,21 @@ def _net_problem(n_features: int, hidden: int, dtype):
         pm, X, y = args
         p = unravel(theta)
         e = jnp.tanh(X @ p.W1.T + p.b1) @ p.W2 + p.b2 - y
-        G, g = p.normal_equations(X, e)
+        G, g = p.normal_equations(X, e, chunk=_CHUNK)
         return 0.5 * jnp.dot(e, e), G * pm[:, None] * pm[None, :], g * pm
 
     return forward, evaluate
 
 
-def _train_impl(theta0, pm, XT, yT, XS, yS, *, n_features, hidden, max_steps, max_fail, block):
+# batched_while work compaction (heuristic): a first sweep of `first` LM steps for blocks
+# of `block` members, then the `tail` still-running members `bs` steps at a time.
+_OPTS = dict(block=16, first=10, tail=16, bs=5)
+_CHUNK = 256
+
+
+def _train_impl(
+    theta0, pm, XT, yT, XS, yS, *, n_features, hidden, max_steps, max_fail, block, first, tail, bs
+):
     forward, evaluate = _net_problem(n_features, hidden, theta0.dtype)
     rtol = 1e-7
     feasible = lambda th: jnp.asarray(True)
@@ -310,7 +326,17 @@ def _train_impl(theta0, pm, XT, yT, XS, yS, *, n_features, hidden, max_steps, ma
 
 
 _train_jit = jax.jit(
-    _train_impl, static_argnames=("n_features", "hidden", "max_steps", "max_fail", "block")
+    _train_impl,
+    static_argnames=(
+        "n_features",
+        "hidden",
+        "max_steps",
+        "max_fail",
+        "block",
+        "first",
+        "tail",
+        "bs",
+    ),
 )
 
 
@@ -339,14 +365,17 @@ def train_network_group(
     compiled trainer: the reference the benchmark times against). The initialisation
     with the lowest stopping-block error is kept per candidate."""
     hidden = cands[0].hidden
+    X = X[:, : n_pool * (dmax + 1)]  # networks: no square features (they are nonlinear)
     F = X.shape[1]
-    fm = np.repeat(np.stack([feature_mask(c, n_pool, dmax) for c in cands]), inits, axis=0)
+    fm = np.repeat(
+        np.stack([feature_mask(c, n_pool, dmax, squares=False) for c in cands]), inits, axis=0
+    )
     keys = jr.split(key, fm.shape[0])
     theta0, pm = init_members(keys, jnp.asarray(fm), F, hidden)
     Xj = jnp.asarray(X)
     T, S = role == 0, role == 1
     XT, yT, XS, yS = Xj[T], jnp.asarray(y[T]), Xj[S], jnp.asarray(y[S])
-    opts = dict(n_features=F, hidden=hidden, max_steps=max_steps, max_fail=max_fail, block=64)
+    opts = dict(n_features=F, hidden=hidden, max_steps=max_steps, max_fail=max_fail, **_OPTS)
     # compile first (reported apart), then run
     t0 = time.perf_counter()
     if loop:

@@ -2,14 +2,15 @@
 study's relevance/redundancy criterion), greedy forward selection with held-out scoring,
 and the enumeration of candidate designs.
 
-Forward selection scores a subset by the blocked cross-validation error (contiguous
-folds of the calibration data) of a cheap linear model
-that can follow the thermal dynamics: least squares on the inputs filtered by a
-first-order lag, the time constant profiled on a grid that includes the static case. An
-input joins only when it lowers that held-out error by at least 1 % and significantly
-(paired moving-block bootstrap, 95 %): a distractor correlated with an input already
-chosen explains nothing new on held-out data and stays out, however high its correlation
-with the target.
+Linear structures come plain and with the squares of their inputs (a quadratic static
+nonlinearity). Forward selection scores a subset by the blocked cross-validation error
+(contiguous folds of the calibration data) of a cheap linear model that can follow the
+thermal dynamics: least squares on the inputs and their squares filtered by a first-order
+lag, the time constant profiled on a grid that includes the static case. An input joins
+only when it lowers that held-out error by at least 2 % and significantly (paired
+moving-block bootstrap, 95 %): a distractor correlated with an input already chosen
+explains nothing new on held-out data and stays out, however high its correlation with
+the target.
 """
 
 from __future__ import annotations
@@ -104,13 +105,16 @@ def forward_selection(
     n_T = int(np.sum(role == 0))
     tau = np.geomspace(2 * dt, max(n_T * dt / 2, 4 * dt), 40)
     a_grid = np.concatenate([[0.0], np.exp(-dt / tau)])
-    Z = _lag_bank(U, starts, a_grid)[:, cal]  # (grid, calibration sample, input)
+    m = U.shape[1]
+    # each input with its square (a static nonlinearity such as friction heat ∝ n^α)
+    Z = _lag_bank(np.concatenate([U, U**2], axis=1), starts, a_grid)[:, cal]
     yc, mc = y[cal], measured[cal]
     # contiguous folds of the calibration samples (blocked cross-validation)
     fold = np.minimum((np.arange(cal.size) * folds) // cal.size, folds - 1)
     scored = mc
 
     def score(sub: list[int]) -> tuple[float, np.ndarray]:
+        sub = list(sub) + [m + j for j in sub]
         e = np.empty(cal.size)
         for k in range(folds):
             tr, te = fold != k, fold == k
@@ -142,7 +146,7 @@ def forward_selection(
         r, e = tried[j]
         reps = bootstrap_mse(np.stack([current**2, e**2]), block, seed=seed)
         p_better = float(np.mean(reps[1] < reps[0]))
-        accept = (r < 0.99 * cur_rmse) and p_better >= 0.95
+        accept = (r < 0.98 * cur_rmse) and p_better >= 0.95
         steps.append(
             {
                 "tried": {names[k]: v for k, v in last_tried.items()},
@@ -182,13 +186,20 @@ def candidates(
     subsets = [s for k in range(1, n_pool + 1) for s in itertools.combinations(range(n_pool), k)]
     subsets.sort(key=lambda s: (len(s), s))
     groups: dict[str, list[Candidate]] = {}
+    both = (False, True)
     if "regression" in structures:
-        groups["regression"] = [Candidate("regression", s, (0,)) for s in subsets]
+        groups["regression"] = [
+            Candidate("regression", s, (0,), quadratic=q) for q in both for s in subsets
+        ]
     if "lag" in structures:
-        groups["lag"] = [Candidate("lag", s, (0,)) for s in subsets]
+        groups["lag"] = [Candidate("lag", s, (0,), quadratic=q) for q in both for s in subsets]
     if "arx" in structures:
         groups["arx"] = [
-            Candidate("arx", s, d, na=na) for s in subsets for d in delay_sets for na in arx_orders
+            Candidate("arx", s, d, na=na, quadratic=q)
+            for q in both
+            for s in subsets
+            for d in delay_sets
+            for na in arx_orders
         ]
     for h in hidden:
         net = []
