@@ -319,7 +319,8 @@ def markdown(res: dict) -> str:
     L += [
         "## Recovery on the spindle twin",
         "",
-        f"Twin effects {RECOVERY_EFFECTS} (air temperature unmeasured); {r['hours']:.0f} h of random speed parts at "
+        f"Twin effects {RECOVERY_EFFECTS} (air temperature unmeasured); "
+        f"{r['hours']:.0f} h of random speed parts at "
         f"{r['dt_s']:.0f} s ({r['samples']} samples); candidate inputs T_chassis, v_m and the "
         f"distractors {', '.join(r['distractors'])}; last 30 % held out as one block. "
         f"{r['candidates_evaluated']} candidate designs in {r['wall_s']:.0f} s (load average "
@@ -359,7 +360,8 @@ def markdown(res: dict) -> str:
         "-- networks: one initialisation -- at a time); run times exclude compilation. "
         f"Load average {s['load']:.1f}.",
         "",
-        "| group | candidates | trainings | batched [s] | loop [s] | speed-up | compile batched / loop [s] |",
+        "| group | candidates | trainings | batched [s] | loop [s] | speed-up | "
+        "compile batched / loop [s] |",
         "|---|---:|---:|---:|---:|---:|---|",
     ]
     for g in s["groups"]:

@@ -292,3 +292,36 @@ def test_cli(spindle, tmp_path, capsys):
     rep = json.loads((tmp_path / "o" / "report.json").read_text())
     assert rep["target"] == "T_bearing" and rep["best"]["rank"] == 1
     assert not any(p.name.startswith(".o.") for p in tmp_path.iterdir())  # no temp folder left
+
+
+def test_ctrl_c_returns_designs_ranked_so_far(spindle, monkeypatch, tmp_path, capsys):
+    import jaxvs.studies.design._design as D
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(D, "train_network_group", interrupted)
+    rep = jaxvs.design(spindle, target="T_bearing", inputs=["T_chassis", "v_m"], **FAST)
+    assert rep["interrupted"] and rep["coverage"]["stopped_by"] == "interrupt"
+    # the linear groups ran before the networks: they are ranked, the networks are not
+    assert rep["candidates_evaluated"] > 0
+    assert {d["structure"] for d in rep.designs} <= {"regression", "lag", "arx"}
+    rec = jaxvs.data.Record({k: v for k, v in spindle.items() if k != "t"}, t=spindle["t"])
+    path = jaxvs.data.save_csv(rec, tmp_path / "run.csv")
+    code = main(
+        [
+            "design",
+            str(path),
+            "--target",
+            "T_bearing",
+            "--inputs",
+            "T_chassis,v_m",
+            "--out",
+            str(tmp_path / "o"),
+            "--quiet",
+            "--no-figures",
+        ]
+    )
+    assert code == 130
+    assert "interrupted" in capsys.readouterr().err
+    assert json.loads((tmp_path / "o" / "report.json").read_text())["interrupted"] is True
