@@ -81,4 +81,5 @@ from .models import (
     zeros as zeros,
 )
 from .studies import fit_first_order as fit_first_order, idim_ls as idim_ls
+from .studies.design import DesignReport as DesignReport, design as design
 

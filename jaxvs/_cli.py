@@ -77,6 +77,37 @@ def _parser() -> argparse.ArgumentParser:
     chk.add_argument(
         "--option", action="append", default=[], metavar="KEY=VALUE", help="family option"
     )
+    des = sub.add_parser(
+        "design",
+        help="search inputs, delays and model structures for a virtual sensor and rank them",
+        description=(
+            "Search candidate inputs, their delays and model structures (static regression, "
+            "first-order lag, ARX, static network, TDNN) for a virtual sensor of --target in "
+            "one vectorised run, rank the designs on held-out data (whole experiments or a "
+            "contiguous block), and write report.json, report.md, report.html, figures and "
+            "best.eqx (jaxvs.load_model) to --out. The target may be sparse: empty/NaN cells "
+            "between measurements, or --target-samples."
+        ),
+    )
+    des.add_argument("data", nargs="+", help="calibration experiment file(s)")
+    des.add_argument("--target", required=True, help="name of the signal to predict")
+    des.add_argument(
+        "--inputs", default=None, help="candidate inputs A,B,... (default: all other signals)"
+    )
+    des.add_argument("--validate", nargs="+", default=None, help="held-out experiment file(s)")
+    des.add_argument("--out", required=True, help="output folder (replaced atomically)")
+    des.add_argument("--budget", type=float, default=None, help="search time limit [s]")
+    des.add_argument(
+        "--target-samples", default=None, help="file of sparse target samples (t, target)"
+    )
+    des.add_argument("--max-inputs", type=int, default=4, help="size of the input pool")
+    des.add_argument("--max-delay", type=int, default=2, help="largest input delay [samples]")
+    des.add_argument("--hidden", default="3,6,10,15", help="network hidden sizes (comma separated)")
+    des.add_argument("--inits", type=int, default=3, help="initialisations per network")
+    des.add_argument("--holdout", type=float, default=0.3, help="share held out (one record)")
+    des.add_argument("--seed", type=int, default=0, help="initialisation and bootstrap seed")
+    des.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    des.add_argument("--quiet", action="store_true", help="no progress messages")
     return p
 
 
@@ -166,6 +197,57 @@ def _diagnose(args) -> int:
     return 0
 
 
+def _design(args) -> int:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)  # a program may; the library never does
+    import pathlib
+
+    for f in list(args.data) + list(args.validate or []) + [args.target_samples or ""]:
+        if f and not pathlib.Path(f).exists():
+            print(f"jaxvs: error: no such file: {f}", file=sys.stderr)
+            return 2
+    try:
+        hidden = tuple(int(h) for h in args.hidden.split(",") if h.strip())
+    except ValueError:
+        print(
+            f"jaxvs: error: --hidden expects integers like 3,6,10; got {args.hidden!r}",
+            file=sys.stderr,
+        )
+        return 2
+    inputs = [s.strip() for s in args.inputs.split(",") if s.strip()] if args.inputs else None
+    try:
+        report = jaxvs.design(
+            list(args.data),
+            target=args.target,
+            inputs=inputs,
+            validation=list(args.validate) if args.validate else None,
+            budget=args.budget,
+            target_samples=args.target_samples,
+            max_inputs=args.max_inputs,
+            max_delay=args.max_delay,
+            hidden=hidden,
+            inits=args.inits,
+            holdout=args.holdout,
+            seed=args.seed,
+            progress=False if args.quiet else None,
+        )
+    except (ValueError, TypeError) as err:
+        print(f"jaxvs: error: {err}", file=sys.stderr)
+        return 2
+    out = report.save(args.out, figures=not args.no_figures)
+    if not args.quiet:
+        print(report.to_markdown())
+    print(
+        f"written: {out / 'report.json'}, {out / 'report.md'}, {out / 'report.html'}"
+        + (f", {out / 'best.eqx'}" if report.best_model is not None else "")
+    )
+    if report["interrupted"]:
+        print("jaxvs design: interrupted; the designs ranked so far were written.", file=sys.stderr)
+        return 130
+    return 3 if report.content.get("not_identifiable") else 0
+
+
 def _compilation_cache() -> None:
     """Keep XLA's compiled code between runs of the command (a program may configure JAX;
     the library never does): a second `jaxvs diagnose` on data of the same size skips the
@@ -189,7 +271,7 @@ def _compilation_cache() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    if args.command in ("demo", "diagnose"):
+    if args.command in ("demo", "diagnose", "design"):
         _compilation_cache()
     if args.command == "demo":
         from ._demo import run_demo
@@ -206,6 +288,12 @@ def main(argv: list[str] | None = None) -> int:
             return _diagnose(args)
         except KeyboardInterrupt:
             print("jaxvs diagnose: interrupted; nothing was written.", file=sys.stderr)
+            return 130
+    if args.command == "design":
+        try:
+            return _design(args)
+        except KeyboardInterrupt:
+            print("jaxvs design: interrupted; nothing was written.", file=sys.stderr)
             return 130
     return 2  # pragma: no cover - argparse enforces the sub-command
 

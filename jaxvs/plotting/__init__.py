@@ -1,6 +1,7 @@
 """Figures: the only part of jaxvs that imports matplotlib."""
 
 from ._bode import bode_plot as bode_plot
+from ._design import plot_design as plot_design
 from ._diagnosis import plot_diagnosis as plot_diagnosis
 from ._drive import (
     ballbar_plot as ballbar_plot,

@@ -4,12 +4,20 @@
   selection, virtual-sensor metrics);
 - `jaxvs.studies.drive`: CNC axis drives (IDIM-LS, closed-loop calibration);
 - `jaxvs.studies.tmf`: TMF virtual sensor (identification routes, position families);
-- `jaxvs.studies.benchmarks`: public identification benchmarks as tasks (EMPS first).
+- `jaxvs.studies.benchmarks`: public identification benchmarks as tasks (EMPS first);
+- `jaxvs.studies.design`: the virtual-sensor design assistant (`jaxvs.design`).
 
 Every public name of the sub-packages is also available here.
 """
 
-from . import benchmarks as benchmarks, drive as drive, thermal as thermal, tmf as tmf
+from . import (
+    benchmarks as benchmarks,
+    design as design,
+    drive as drive,
+    thermal as thermal,
+    tmf as tmf,
+)
+from .design import DesignReport as DesignReport
 from .drive import (
     ForcePrediction as ForcePrediction,
     IDIMResult as IDIMResult,
