@@ -27,14 +27,16 @@ with warnings.catch_warnings():
 
         successful = ""
         max_steps_reached = (
-            "The solver did not converge within max_steps. Increase `max_steps` (or the "
+            "The maximum number of Levenberg-Marquardt (or solver) steps was reached: the fit "
+            "did not converge within max_steps. Increase `max_steps` (or the "
             "training `epochs`), loosen the solver's `rtol`, start closer to the solution "
             "(e.g. jaxvs.calibration.multistart), or reparametrise badly scaled parameters "
             "(positive/bounded); for fit_rational check the model order. Pass throw=False "
             "to inspect the last iterate."
         )
         nonfinite = (
-            "NaN or inf appeared during the fit: the model could not be evaluated at some "
+            "Non-finite values (NaN or inf) appeared during the fit: the model could not be "
+            "evaluated at some "
             "iterate (a parameter crossed zero, a simulation diverged, a frequency grid "
             "with a pole at the origin, extreme weights or data spanning ~300 decades). "
             "Constrain the parameters (jaxvs.calibration.positive / bounded / stable), "
@@ -67,9 +69,9 @@ with warnings.catch_warnings():
             "solver (jaxvs.calibration.LevenbergMarquardt)."
         )
         unstable_initial_guess = (
-            "The initial guess is unstable (a pole in the right half-plane), so its "
-            "simulation diverges, or every iterate must stay stable. Start from a stable "
-            "model (reflect unstable poles p -> -conj(p)), parametrise it with "
+            "The initial guess has poles in the right half-plane: the initial guess is "
+            "unstable, so its simulation diverges, or every iterate must stay stable. Start "
+            "from a stable model (reflect unstable poles p -> -conj(p)), parametrise it with "
             "jaxvs.calibration.stable(model), or pass stable=False to fit_rational to fit "
             "an unstable model."
         )

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..data import Record
-from ._base import GapModel, unwrap
+from ._base import GapModel, NotIdentifiable, unwrap
 from ._diagnose import FAMILIES, _check_signals, _records
 
 __all__ = ["CheckReport", "check"]
@@ -354,6 +354,8 @@ def check(data: Any, *, family: str, **options: Any) -> CheckReport:
     try:
         experiments = [fam.prepare(record, name) for record, name in recs]
         nominal = unwrap(fam.nominal(experiments))
+    except NotIdentifiable as error:
+        blocking.append(f"the nominal model is not identifiable: {error}")
     except ValueError as error:
         blocking.append(f"the family's preprocessing refuses the records: {error}")
     else:
