@@ -3,6 +3,7 @@
 the tracer test, and a matrix exponential that compiles fast."""
 
 import collections
+import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -10,9 +11,10 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
-__all__ = ["expm", "is_traced", "timed_call"]
+__all__ = ["expm", "is_traced", "json_safe", "timed_call"]
 
 _CACHE: collections.OrderedDict = collections.OrderedDict()
 _CACHE_SIZE = 32
@@ -98,3 +100,21 @@ def expm(m: Float[Array, "n n"]) -> Float[Array, "n n"]:
     v = b[6] * x6 + b[4] * x4 + b[2] * x2 + b[0] * eye
     e = jnp.linalg.solve(v - u, v + u)
     return jax.lax.fori_loop(0, 60, lambda i, e: jnp.where(i < s, e @ e, e), e)
+
+
+def json_safe(x: Any) -> Any:
+    """JSON-safe: NumPy scalars to Python, non-finite floats to None."""
+    if isinstance(x, dict):
+        return {str(k): json_safe(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [json_safe(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return json_safe(x.tolist())
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.floating | float):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x

@@ -4,34 +4,16 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import pathlib
 from typing import Any
 
 import numpy as np
 
+from .._misc import json_safe
 from ._base import Experiment, GapModel
 from ._gapmap import GapCell
 
 __all__ = ["DiagnosisReport"]
-
-
-def _clean(x: Any) -> Any:
-    """JSON-safe: NumPy scalars to Python, non-finite floats to None."""
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_clean(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.floating | float):
-        v = float(x)
-        return v if math.isfinite(v) else None
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
 
 
 @dataclasses.dataclass
@@ -86,7 +68,7 @@ class DiagnosisReport:
 
     def to_json(self) -> dict[str, Any]:
         """The report as a JSON-ready dictionary (the schema of DESIGN.md §3.2)."""
-        return _clean(self.content)
+        return json_safe(self.content)
 
     def to_markdown(self) -> str:
         c = self.content

@@ -7,7 +7,6 @@ import base64
 import dataclasses
 import html
 import json
-import math
 import os
 import pathlib
 import shutil
@@ -16,25 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from ..._misc import json_safe
+
 __all__ = ["DesignReport"]
-
-
-def _clean(x: Any) -> Any:
-    """JSON-safe: NumPy scalars to Python, non-finite floats to None."""
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_clean(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.floating | float):
-        v = float(x)
-        return v if math.isfinite(v) else None
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
 
 
 def _fmt(v: Any, nd: int = 4) -> str:
@@ -90,7 +73,7 @@ class DesignReport:
         return self.content["best"]
 
     def to_json(self) -> dict[str, Any]:
-        return _clean(self.content)
+        return json_safe(self.content)
 
     def to_markdown(self) -> str:
         c = self.content
@@ -262,7 +245,7 @@ class DesignReport:
                 save_model(
                     tmp / "best.eqx",
                     self.best_model,
-                    metadata={"target": self.content["target"], "best": _clean(self.best)},
+                    metadata={"target": self.content["target"], "best": json_safe(self.best)},
                 )
             (tmp / "report.json").write_text(json.dumps(self.to_json(), indent=2) + "\n")
             (tmp / "report.md").write_text(self.to_markdown())
