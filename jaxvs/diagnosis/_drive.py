@@ -55,6 +55,7 @@ from ._base import (
     GapModel,
     NotIdentifiable,
     check,
+    delay_rules,
 )
 from ._stats import (
     difference_noise_sigma,
@@ -376,17 +377,7 @@ class TimeDelay(AbstractEffect):
         return 0
 
     def admissible(self, context):
-        tau = _f(self.tau)
-        return check(
-            (np.isfinite(tau), "non-finite delay"),
-            (tau > 0, f"non-causal delay τ = {1e3 * tau:.3g} ms (the force cannot act early)"),
-            (
-                tau >= context.record_dt * (1 - 1e-9),
-                f"delay τ = {1e3 * tau:.3g} ms shorter than one sample "
-                f"({1e3 * context.record_dt:.3g} ms)",
-            ),
-            (tau < 0.1 * context.duration, f"delay τ = {tau:.3g} s not short against the record"),
-        )
+        return check(*delay_rules(_f(self.tau), context, " (the force cannot act early)"))
 
     def parameters(self):
         return {"tau": _f(self.tau)}

@@ -60,6 +60,7 @@ from ._base import (
     GapModel,
     NotIdentifiable,
     check,
+    delay_rules,
     predict,
 )
 from ._stats import quantisation_step
@@ -439,16 +440,7 @@ class SensorDelay(AbstractEffect):
         return 0
 
     def admissible(self, context):
-        tau = _f(self.tau)
-        return check(
-            (np.isfinite(tau), "non-finite delay"),
-            (tau > 0, f"non-causal delay τ = {1e3 * tau:.3g} ms"),
-            (
-                tau >= context.record_dt * (1 - 1e-9),
-                f"delay τ = {1e3 * tau:.3g} ms shorter than one sample",
-            ),
-            (tau < 0.1 * context.duration, f"delay τ = {tau:.3g} s not short against the record"),
-        )
+        return check(*delay_rules(_f(self.tau), context))
 
     def parameters(self):
         return {"tau_s": _f(self.tau)}
