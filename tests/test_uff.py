@@ -119,9 +119,12 @@ def test_impact_records_round_trip(tmp_path, shared_data):
     data = np.load(shared_data / "pyFRF_impact" / "measurements_1.npy")
     rec = Record({"force": data[1], "acc": data[2]}, t=data[0], units={"force": "N", "acc": "g"})
     back = load_uff_record(save_uff(tmp_path / "hit.uff", rec))
-    assert back.names == ("force", "acc") and back.units == {"force": "N", "acc": "g"}
+    # A UFF 'g' is standard gravity: loaded in m/s^2, the label kept in original_units.
+    assert back.names == ("force", "acc") and back.units == {"force": "N", "acc": "m/s^2"}
+    assert back.metadata["original_units"] == {"acc": "g0"}
     assert back.dt == rec.dt and back.t0 == rec.t0  # 3.90625e-05 s is exact in the header
-    np.testing.assert_array_equal(back["acc"], rec["acc"])
+    # g0 = 9.80665 m/s^2 exactly (CGPM 1901); one float64 multiplication: 1 ulp.
+    np.testing.assert_allclose(back["acc"], rec["acc"] * 9.80665, rtol=1e-15)
     np.testing.assert_array_equal(back["force"], rec["force"])
 
 

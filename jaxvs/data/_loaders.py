@@ -181,16 +181,26 @@ def _scalar(value: np.ndarray) -> Any:
 
 
 def _split_variables(
-    variables: Mapping[str, np.ndarray], *, time: str
+    variables: Mapping[str, np.ndarray],
+    *,
+    time: str,
+    source: str,
+    names: Sequence[str] | None = None,
 ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Sort named arrays into signal columns (the length of the time vector) and metadata."""
+    """Sort named arrays into signal columns (the length of the time vector) and metadata.
+
+    A vector that looks like a signal but has another length than the time vector is
+    refused, never moved silently to the metadata (that would load the file without it).
+    """
     columns_1d = {name: col for name, v in variables.items() if (col := _as_column(v)) is not None}
     if time in columns_1d:
         n = columns_1d[time].shape[0]
+        base = f"the time vector {time!r}"
     else:
         lengths = [col.shape[0] for col in columns_1d.values()]
         # Without a time vector, the signals are the columns of the most common length.
         n = max(set(lengths), key=lengths.count) if lengths else -1
+        base = "the other signals"
     columns: dict[str, np.ndarray] = {}
     metadata: dict[str, Any] = {}
     for name, value in variables.items():
@@ -198,6 +208,20 @@ def _split_variables(
         if column is not None and column.shape[0] == n:
             columns[name] = column
             continue
+        # Heuristic: a vector at least half as long as the time base is a signal whose
+        # samples were lost or added (short vectors -- gains, poles -- are metadata). With
+        # names=[...] only the requested signals are checked.
+        if (
+            column is not None
+            and name != time
+            and 2 * column.shape[0] >= n
+            and (names is None or name in names)
+        ):
+            raise ValueError(
+                f"{source}: variable {name!r} has {column.shape[0]} samples but {base} has "
+                f"{n}; every signal needs one value per time step. Trim or resample it to "
+                "the time base, or pass names=[...] to load only the signals you need."
+            )
         scalar = _scalar(value)
         if scalar is not None:
             metadata[name] = scalar
@@ -564,7 +588,9 @@ def _from_variables(
         units = _decode_json(variables.pop(_UNITS_KEY), "units", source)
     if _METADATA_KEY in variables:
         stored_metadata = _decode_json(variables.pop(_METADATA_KEY), "metadata", source)
-    columns, metadata = _split_variables(variables, time=time)
+    columns, metadata = _split_variables(
+        variables, time=time, source=source, names=_names_list(names)
+    )
     if stored_metadata is not None:
         metadata = {**metadata, **stored_metadata}
     return _build(
@@ -770,7 +796,9 @@ def load_hdf5(
         visit(handle, "")
         attributes = {key: _attr_value(value) for key, value in handle.attrs.items()}
     stored = attributes.pop(_METADATA_KEY, None)
-    columns, found_metadata = _split_variables(variables, time=time)
+    columns, found_metadata = _split_variables(
+        variables, time=time, source=source, names=_names_list(names)
+    )
     metadata = {**metadata, **found_metadata, **attributes}
     if stored is not None:
         metadata.update(_decode_json(stored, "metadata", source))

@@ -255,6 +255,13 @@ class Record:
                 raise ValueError(f"dt must be a positive finite sampling period [s], got {dt!r}.")
             if not math.isfinite(t0):
                 raise ValueError(f"t0 must be finite, got {t0!r}.")
+        end = t0 + dt * (n - 1)
+        if not (math.isfinite(end) and math.isfinite(1.0 / dt)):
+            raise ValueError(
+                f"The time base t0={t0!r} s, dt={dt!r} s over {n} samples does not fit in "
+                "float64 (the last time or the sampling frequency 1/dt is infinite); give dt "
+                "and t0 in seconds (e.g. dt=1e-3 for 1 kHz)."
+            )
 
         unit_map: dict[str, str] = {}
         if units is not None:

@@ -30,6 +30,7 @@ import numpy as np
 
 from ._frf import FRFData
 from ._record import Record
+from ._units import si_record
 
 __all__ = ["load_uff_frf", "load_uff_modes", "load_uff_record", "save_uff", "uff_datasets"]
 
@@ -129,7 +130,41 @@ def _read(path: str | os.PathLike) -> tuple[Path, list[dict]]:
         s.setdefault("type", t)
     if not sets:
         raise ValueError(f"{path}: the file holds no UFF dataset.")
+    _check_complete(path, sets)
     return path, sets
+
+
+def _delimiters(data: bytes) -> int:
+    """The number of `    -1` dataset delimiters in `data` (pyuff's rule: the tag ends the
+    line, the file, or is padded with blanks to column 80)."""
+    count, at = 0, data.find(b"    -1")
+    while at != -1:
+        rest = data[at + 6 : at + 80]
+        if not rest or rest[:1] in (b"\n", b"\r") or rest == b" " * 74:
+            count += 1
+        at = data.find(b"    -1", at + 1)
+    return count
+
+
+def _check_complete(path: Path, sets: list[dict]) -> None:
+    """Refuse a file that pyuff read only in part: an unterminated (truncated) dataset, or
+    a dataset 58 with fewer or more values than its header announces (a data line that is
+    not numbers is skipped by pyuff)."""
+    if _delimiters(path.read_bytes()) % 2:
+        raise ValueError(
+            f"{path}: the file ends inside dataset {len(sets)} (0-based; its closing '    -1' "
+            "line is missing): it is truncated. Export or copy the file again."
+        )
+    for i, s in enumerate(sets):
+        if int(s["type"]) != 58 or "num_pts" not in s or "data" not in s:
+            continue
+        expected, found = int(s["num_pts"]), len(np.asarray(s["data"]).reshape(-1))
+        if found != expected:
+            raise ValueError(
+                f"{path}: dataset {i} announces {expected} values but {found} could be read "
+                "(a data line is missing, truncated or not numeric). Repair or export the "
+                "file again."
+            )
 
 
 def uff_datasets(path: str | os.PathLike) -> list[dict[str, Any]]:
@@ -300,13 +335,18 @@ def load_uff_record(
             names = [f"{n}#{i}" for n, (i, _) in zip(names, picked)]
     signals = {n: np.asarray(s["data"], dtype=float) for n, (_, s) in zip(names, picked)}
     units = {n: _unit(s, "ordinate", meta) for n, (_, s) in zip(names, picked)}
+    # heuristic: a time response in 'g' in a modal test file is an acceleration in standard
+    # gravity, never a mass in grams.
+    units = {n: "g0" if u == "g" else u for n, u in units.items()}
     meta["uff_dofs"] = {n: (_dof(s, "rsp"), _dof(s, "ref")) for n, (_, s) in zip(names, picked)}
     if t.shape[0] < 2:
         raise ValueError(f"{path}: a time record needs at least 2 samples.")
     dt = float(picked[0][1].get("abscissa_inc") or (t[1] - t[0]))
     if not int(picked[0][1].get("abscissa_spacing", 1)):
-        return Record(signals, t=t, units=units, metadata=meta)
-    return Record(signals, dt=dt, t0=float(t[0]), units=units, metadata=meta)
+        record = Record(signals, t=t, units=units, metadata=meta)
+    else:
+        record = Record(signals, dt=dt, t0=float(t[0]), units=units, metadata=meta)
+    return si_record(record, f"UFF file {str(path)!r}")
 
 
 def _kind(s: dict) -> str:
