@@ -259,7 +259,7 @@ def test_unsupported_suffix_lists_supported(tmp_path):
 
 
 def test_directory_is_not_a_file(tmp_path):
-    with pytest.raises(ValueError, match="is not a file"):
+    with pytest.raises(ValueError, match="is a directory, not a file"):
         load(tmp_path)
 
 

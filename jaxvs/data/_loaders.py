@@ -61,12 +61,25 @@ PathLike = str | os.PathLike[str]
 # --- helpers ---------------------------------------------------------------------------------
 
 
-def _existing_file(path: PathLike) -> Path:
+def existing_file(path: PathLike) -> Path:
+    """`path` as a `Path` when it names an existing file; every loader starts here."""
+    if not isinstance(path, str | os.PathLike):
+        raise TypeError(
+            f"A file path must be a str or pathlib.Path, got {type(path).__name__}; pass the "
+            "path of the file to read."
+        )
     file = Path(path)
     if not file.exists():
-        raise FileNotFoundError(f"No such file: {str(file)!r}.")
+        raise FileNotFoundError(
+            f"No such file: {str(file)!r}. Check the path (relative paths start in the "
+            f"current directory {os.getcwd()!r})."
+        )
+    if file.is_dir():
+        raise ValueError(
+            f"{str(file)!r} is a directory, not a file; give the path of a file inside it."
+        )
     if not file.is_file():
-        raise ValueError(f"{str(file)!r} is not a file.")
+        raise ValueError(f"{str(file)!r} is not a regular file; give the path of a file.")
     return file
 
 
@@ -318,7 +331,7 @@ def load(
     (each naming the file and the fix); `KeyError` for a requested signal that the file
     does not hold.
     """
-    file = _existing_file(path)
+    file = existing_file(path)
     kind = _sniff(file)
     options = dict(names=names, time=time, dt=dt, time_rtol=time_rtol)
     if kind == ".csv":
@@ -397,7 +410,7 @@ def load_frf(path: PathLike, **options: Any) -> Any:
     `FileNotFoundError`; `ValueError` naming the file and the fix for a time-domain file
     (estimate the FRF with `jaxvs.signal.frf_h1`), an unsupported suffix or a damaged file.
     """
-    file = _existing_file(path)
+    file = existing_file(path)
     kind = _sniff(file)
     if kind in (".unv", ".uff"):
         from ._uff import load_uff_frf
@@ -445,11 +458,29 @@ def load_csv(
     number of cells, duplicate or empty column names, a time unit other than seconds, or
     a missing time column (listing the columns found).
     """
-    file = _existing_file(path)
+    file = existing_file(path)
     source = f"CSV file {str(file)!r}"
     metadata: dict[str, Any] = {}
-    with open(file, newline="", encoding="utf-8-sig") as handle:
-        lines = handle.read().splitlines()
+    try:
+        with open(file, newline="", encoding="utf-8-sig") as handle:
+            text = handle.read()
+    except UnicodeDecodeError as error:
+        raise ValueError(
+            f"{source} is not UTF-8 text (byte {error.object[error.start]:#04x} at position "
+            f"{error.start}); it is binary or in another encoding. Save it as UTF-8 CSV "
+            "(e.g. from Latin-1: open(..., encoding='latin-1') and write it back as UTF-8)."
+        ) from None
+    if "\x00" in text:
+        raise ValueError(f"{source} holds NUL bytes: it is binary or damaged, not a CSV text.")
+    lines = text.splitlines()
+    if text and text[-1] not in "\r\n" and lines[-1].strip() and lines[-1].lstrip()[0] != "#":
+        # A file cut inside its last row would still parse (a shorter last number):
+        # complete CSV files end with a line break.
+        raise ValueError(
+            f"{source}, line {len(lines)}: the file ends inside a row, without a line break: "
+            "it looks truncated. Export it again; if it is complete, add a line break at the "
+            "end of the last line."
+        )
     # Leading blank and comment lines are read as raw text: JSON metadata holds commas and
     # quotes that a CSV reader would split.
     first = 0
@@ -564,10 +595,21 @@ def load_npz(
 
     A `Record`.
     """
-    file = _existing_file(path)
+    file = existing_file(path)
     source = f"NPZ file {str(file)!r}"
-    with np.load(file, allow_pickle=False) as archive:
-        variables = {key: archive[key] for key in archive.files}
+    try:
+        # The file is opened here so that it is closed when NumPy fails half-way.
+        with open(file, "rb") as handle, np.load(handle, allow_pickle=False) as archive:
+            if not hasattr(archive, "files"):
+                raise ValueError("it holds a single .npy array, not an archive of named arrays")
+            variables = {key: archive[key] for key in archive.files}
+    except Exception as error:
+        # zipfile, zlib, EOF and format errors of a truncated or foreign file, and pickled
+        # objects (refused: loading them runs code): one refusal naming the file.
+        raise ValueError(
+            f"{source} cannot be read as a NumPy .npz archive of numeric arrays ({error}). "
+            "Check that the file is complete and was written with np.savez or save_npz."
+        ) from None
     return _from_variables(
         variables, time=time, dt=dt, names=names, source=source, time_rtol=time_rtol
     )
@@ -680,7 +722,7 @@ def load_mat(
 
     A `Record`.
     """
-    file = _existing_file(path)
+    file = existing_file(path)
     variables = _read_mat(file)
     return _from_variables(
         variables,
@@ -761,7 +803,7 @@ def load_hdf5(
     """
     import h5py
 
-    file = _existing_file(path)
+    file = existing_file(path)
     source = f"HDF5 file {str(file)!r}"
     variables: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
@@ -793,8 +835,15 @@ def load_hdf5(
                 if unit is not None:
                     units[name] = str(_attr_value(unit))
 
-        visit(handle, "")
-        attributes = {key: _attr_value(value) for key, value in handle.attrs.items()}
+        try:
+            visit(handle, "")
+            attributes = {key: _attr_value(value) for key, value in handle.attrs.items()}
+        except (OSError, KeyError, RuntimeError, TypeError) as error:
+            # h5py reports damaged objects (a truncated or overwritten file) only on access.
+            raise ValueError(
+                f"{source} is damaged: an object in it cannot be read ({error}). Check that "
+                "the file is complete; copy or export it again."
+            ) from None
     stored = attributes.pop(_METADATA_KEY, None)
     columns, found_metadata = _split_variables(
         variables, time=time, source=source, names=_names_list(names)
@@ -885,7 +934,7 @@ def load_emps(path: PathLike, *, time_rtol: float = DEFAULT_TIME_RTOL) -> Record
 
     `ValueError` when a required EMPS variable is missing.
     """
-    file = _existing_file(path)
+    file = existing_file(path)
     variables = _read_mat(file)
     missing = [name for name in _EMPS_REQUIRED if name not in variables]
     if missing:

@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from ._frf import FRFData
+from ._loaders import existing_file
 from ._record import DEFAULT_TIME_RTOL, Record
 from ._units import si_record
 
@@ -149,9 +150,7 @@ def decode_sinumerik_base85(
 
 
 def _parse(path: PathLike) -> tuple[Path, ET.Element]:
-    file = Path(path)
-    if not file.exists():
-        raise FileNotFoundError(f"No such file: {str(file)!r}.")
+    file = existing_file(path)
     try:
         root = ET.parse(file).getroot()
     except ET.ParseError as error:

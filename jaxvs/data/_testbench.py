@@ -29,21 +29,13 @@ from typing import Any
 
 import numpy as np
 
+from ._loaders import existing_file
 from ._record import DEFAULT_TIME_RTOL, Record
 from ._units import si_record
 
 __all__ = ["is_twincat_scope", "load_mdf", "load_tdms", "load_twincat_scope"]
 
 PathLike = str | os.PathLike[str]
-
-
-def _file(path: PathLike) -> Path:
-    file = Path(path)
-    if not file.exists():
-        raise FileNotFoundError(f"No such file: {str(file)!r}.")
-    if not file.is_file():
-        raise ValueError(f"{str(file)!r} is not a file.")
-    return file
 
 
 def _group_records(
@@ -198,7 +190,7 @@ def load_twincat_scope(
 
     if scaling not in ("as_exported", "apply"):
         raise ValueError(f"scaling must be 'as_exported' or 'apply', got {scaling!r}.")
-    file = _file(path)
+    file = existing_file(path)
     source = f"TwinCAT Scope export {str(file)!r}"
     if not is_twincat_scope(file):
         raise ValueError(
@@ -309,7 +301,7 @@ def load_tdms(
     """
     from nptdms import TdmsFile
 
-    file = _file(path)
+    file = existing_file(path)
     source = f"TDMS file {str(file)!r}"
     # npTDMS reads what it can of a truncated file and only logs a warning; the warning
     # is caught here so that a cut file is refused instead of silently shortened.
@@ -422,7 +414,7 @@ def load_mdf(
     """
     from asammdf import MDF
 
-    file = _file(path)
+    file = existing_file(path)
     source = f"MDF file {str(file)!r}"
     failure = None
     # asammdf's half-built reader of a damaged file raises again in its __del__; that

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from ._frf import FRFData
+from ._loaders import existing_file
 from ._record import Record
 from ._units import si_record
 
@@ -109,9 +110,7 @@ def _label(x: Any) -> str:
 
 
 def _read(path: str | os.PathLike) -> tuple[Path, list[dict]]:
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"UFF file {path} does not exist.")
+    path = existing_file(path)
     pyuff = _pyuff()
     try:
         uff = pyuff.UFF(str(path))
