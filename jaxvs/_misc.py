@@ -118,3 +118,28 @@ def json_safe(x: Any) -> Any:
     if isinstance(x, np.bool_):
         return bool(x)
     return x
+
+
+def check_finite(x: Any, what: str, fix: str) -> Any:
+    """`x` when every value is finite; otherwise a refusal naming `what` and `fix`.
+
+    Concrete arrays raise a `ValueError` with the count and the index of the first bad
+    value; traced arrays (under `jit`) go through `eqx.error_if`, whose return value must
+    be used in place of `x`.
+
+    **Arguments:**
+
+    - `x`: the array.
+    - `what`: what it is, e.g. `"FRFData: H"` or `"lfilter: x"`.
+    - `fix`: what the user should do, one sentence.
+    """
+    if is_traced(x):
+        return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), f"{what} contains NaN or inf. {fix}")
+    bad = ~np.isfinite(np.asarray(x))
+    if bad.any():
+        index = np.unravel_index(int(np.argmax(bad)), bad.shape)
+        raise ValueError(
+            f"{what} has {int(bad.sum())} non-finite value(s) (NaN or inf), the first at index "
+            f"{tuple(int(i) for i in index)}. {fix}"
+        )
+    return x

@@ -298,7 +298,7 @@ def test_not_an_hdf5_file(tmp_path):
 def test_mat_errors(tmp_path):
     garbage = tmp_path / "garbage.mat"
     garbage.write_bytes(b"\x00" * 200)
-    with pytest.raises(ValueError, match="cannot be read as a MAT file"):
+    with pytest.raises(ValueError, match="MAT file .* cannot be read.*export it again"):
         load(garbage)
     # A MATLAB v7.3 file: a 512-byte user block with the MAT header, then HDF5.
     v73 = tmp_path / "v73.mat"

@@ -161,11 +161,14 @@ def _build(
     if not signals:
         raise ValueError(f"{source} holds no signal besides the time column {time!r}.")
     kept_units = {name: unit for name, unit in units.items() if name in signals and unit}
-    if time in columns:
-        return Record(
-            signals, t=columns[time], units=kept_units, metadata=metadata, time_rtol=time_rtol
-        )
-    return Record(signals, dt=dt, units=kept_units, metadata=metadata)
+    try:
+        if time in columns:
+            return Record(
+                signals, t=columns[time], units=kept_units, metadata=metadata, time_rtol=time_rtol
+            )
+        return Record(signals, dt=dt, units=kept_units, metadata=metadata)
+    except ValueError as error:
+        raise ValueError(f"{source}: {error}") from None
 
 
 def _as_column(value: np.ndarray) -> np.ndarray | None:
@@ -623,25 +626,29 @@ def _from_variables(
     names: Iterable[str] | str | None,
     source: str,
     time_rtol: float,
+    units: dict[str, str] | None = None,
+    metadata: dict[str, Any] | None = None,
 ) -> Record:
-    units: dict[str, str] = {}
-    stored_metadata: dict[str, Any] | None = None
+    """A `Record` from the named arrays of a binary file (NPZ, MAT, HDF5): the arrays of the
+    time vector's length are signals, the rest metadata (after `metadata`, which holds what
+    the format stores elsewhere); the units and metadata that jaxvs writers store as JSON
+    (`jaxvs_units`, `jaxvs_metadata`) are restored."""
+    units = dict(units or {})
+    stored_metadata: dict[str, Any] = {}
     if _UNITS_KEY in variables:
-        units = _decode_json(variables.pop(_UNITS_KEY), "units", source)
+        units.update(_decode_json(variables.pop(_UNITS_KEY), "units", source))
     if _METADATA_KEY in variables:
         stored_metadata = _decode_json(variables.pop(_METADATA_KEY), "metadata", source)
-    columns, metadata = _split_variables(
+    columns, found_metadata = _split_variables(
         variables, time=time, source=source, names=_names_list(names)
     )
-    if stored_metadata is not None:
-        metadata = {**metadata, **stored_metadata}
     return _build(
         columns,
         time=time,
         dt=dt,
         names=_names_list(names),
         units=units,
-        metadata=metadata,
+        metadata={**found_metadata, **(metadata or {}), **stored_metadata},
         source=source,
         found=variables,
         time_rtol=time_rtol,
@@ -696,8 +703,13 @@ def _read_mat(file: Path, *, names_only: bool = False) -> dict[str, Any]:
             f"{str(file)!r} is a MATLAB v7.3 file, which is HDF5 inside; load it with "
             "load_hdf5 (or save it in MATLAB with -v7)."
         ) from None
-    except (ValueError, TypeError, OSError, scipy.io.matlab.MatReadError) as error:
-        raise ValueError(f"{str(file)!r} cannot be read as a MAT file ({error}).") from None
+    except Exception as error:
+        # scipy reports a truncated or foreign file with many exception types (MatReadError,
+        # ValueError, IndexError, struct.error, zlib.error ...): one refusal naming the file.
+        raise ValueError(
+            f"MAT file {str(file)!r} cannot be read ({type(error).__name__}: {error}). Check "
+            "that the file is complete and a MATLAB v5/v7 .mat file; export it again."
+        ) from None
     return {key: value for key, value in content.items() if not key.startswith("__")}
 
 
@@ -817,8 +829,9 @@ def load_hdf5(
         def visit(group: Any, prefix: str) -> None:
             # Iterating a group (unlike `visititems`) keeps the creation order when the
             # file tracks it, so signals come back in the order they were written.
-            for key, item in group.items():
+            for key in group.keys():
                 name = prefix + key
+                item = group[key]  # unlike items(), raises for an object it cannot open
                 if isinstance(item, h5py.Group):
                     visit(item, name + "/")
                     continue
@@ -845,22 +858,17 @@ def load_hdf5(
                 "the file is complete; copy or export it again."
             ) from None
     stored = attributes.pop(_METADATA_KEY, None)
-    columns, found_metadata = _split_variables(
-        variables, time=time, source=source, names=_names_list(names)
-    )
-    metadata = {**metadata, **found_metadata, **attributes}
     if stored is not None:
-        metadata.update(_decode_json(stored, "metadata", source))
-    return _build(
-        columns,
+        variables[_METADATA_KEY] = np.array(stored)
+    return _from_variables(
+        variables,
         time=time,
         dt=dt,
-        names=_names_list(names),
-        units=units,
-        metadata=metadata,
+        names=names,
         source=source,
-        found=variables,
         time_rtol=time_rtol,
+        units=units,
+        metadata={**metadata, **attributes},
     )
 
 
@@ -882,10 +890,13 @@ def save_hdf5(record: Record, path: PathLike) -> Path:
             raise ValueError(
                 f"Signal name {name!r} contains '/', which HDF5 reads as a group; rename it."
             )
-    with h5py.File(file, "w", track_order=True) as handle:
-        handle.create_dataset("t", data=record.t).attrs["unit"] = "s"
+    # Checksums everywhere, so a damaged copy is refused instead of read with wrong numbers:
+    # the HDF5 1.8 file format (readable by HDF5 >= 1.8, MATLAB, h5py) checksums object
+    # headers, links and attributes; Fletcher-32 checksums each dataset's data.
+    with h5py.File(file, "w", track_order=True, libver=("v108", "latest")) as handle:
+        handle.create_dataset("t", data=record.t, fletcher32=True).attrs["unit"] = "s"
         for name in record.names:
-            dataset = handle.create_dataset(name, data=np.asarray(record[name]))
+            dataset = handle.create_dataset(name, data=np.asarray(record[name]), fletcher32=True)
             if name in record.units:
                 dataset.attrs["unit"] = record.units[name]
         handle.attrs[_METADATA_KEY] = _metadata_json(record)
@@ -963,4 +974,7 @@ def load_emps(path: PathLike, *, time_rtol: float = DEFAULT_TIME_RTOL) -> Record
     if "pulses_N" in variables:
         signals["pulses"] = column("pulses_N")
     metadata: dict[str, Any] = {**gains, "source": "EMPS", "file": file.name}
-    return Record(signals, t=column("t"), units=units, metadata=metadata, time_rtol=time_rtol)
+    try:
+        return Record(signals, t=column("t"), units=units, metadata=metadata, time_rtol=time_rtol)
+    except ValueError as error:
+        raise ValueError(f"EMPS file {str(file)!r}: {error}") from None

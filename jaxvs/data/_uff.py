@@ -271,6 +271,16 @@ def _functions(path: Path, sets, index, skip_unsupported, wanted: tuple[int, ...
     return picked
 
 
+def _check_abscissa(path: Path, picked, meta: dict, allowed, axis: str, unit_name: str) -> None:
+    for i, s in picked:
+        unit = _unit(s, "abscissa", meta)
+        if unit and unit.lower() not in allowed:
+            raise ValueError(
+                f"{path}: dataset {i} has its {axis} in {unit!r}; jaxvs reads it in "
+                f"{unit_name}. Re-export the file with the abscissa in {unit_name}."
+            )
+
+
 def _same_grid(path: Path, picked, axis_name: str) -> np.ndarray:
     x0 = np.asarray(picked[0][1]["x"], dtype=float)
     for i, s in picked[1:]:
@@ -317,13 +327,7 @@ def load_uff_record(
     path, sets = _read(path)
     meta = _metadata(path, sets)
     picked = _functions(path, sets, index, skip_unsupported, (_FUNC_TIME,), "time response")
-    for i, s in picked:
-        unit = _unit(s, "abscissa", meta)
-        if unit and unit.lower() not in _TIME_UNITS:
-            raise ValueError(
-                f"{path}: dataset {i} has its time axis in {unit!r}; jaxvs records are in "
-                "seconds. Re-export the file with the abscissa in s."
-            )
+    _check_abscissa(path, picked, meta, _TIME_UNITS, "time axis", "s")
     t = _same_grid(path, picked, "time")
     ids = [_label(s.get("id1")) for _, s in picked]
     if all(ids) and len(set(ids)) == len(ids):
@@ -341,11 +345,15 @@ def load_uff_record(
     if t.shape[0] < 2:
         raise ValueError(f"{path}: a time record needs at least 2 samples.")
     dt = float(picked[0][1].get("abscissa_inc") or (t[1] - t[0]))
-    if not int(picked[0][1].get("abscissa_spacing", 1)):
-        record = Record(signals, t=t, units=units, metadata=meta)
-    else:
-        record = Record(signals, dt=dt, t0=float(t[0]), units=units, metadata=meta)
-    return si_record(record, f"UFF file {str(path)!r}")
+    source = f"UFF file {str(path)!r}"
+    try:
+        if not int(picked[0][1].get("abscissa_spacing", 1)):
+            record = Record(signals, t=t, units=units, metadata=meta)
+        else:
+            record = Record(signals, dt=dt, t0=float(t[0]), units=units, metadata=meta)
+    except ValueError as error:
+        raise ValueError(f"{source}: {error}") from None
+    return si_record(record, source)
 
 
 def _kind(s: dict) -> str:
@@ -412,13 +420,7 @@ def load_uff_frf(
     cohs = [(i, s) for i, s in picked if int(s["func_type"]) == _FUNC_COHERENCE]
     if not frfs:
         raise ValueError(f"{path}: only coherences, no FRF (function type 4 or 5) in the file.")
-    for i, s in frfs:
-        unit = _unit(s, "abscissa", meta)
-        if unit and unit.lower() not in _FREQ_UNITS:
-            raise ValueError(
-                f"{path}: dataset {i} has its frequency axis in {unit!r}; jaxvs FRFs are in "
-                "Hz. Re-export the file with the abscissa in Hz."
-            )
+    _check_abscissa(path, frfs, meta, _FREQ_UNITS, "frequency axis", "Hz")
     f = _same_grid(path, picked, "frequency")
     described = [
         (i, _unit(s, "ordinate", meta), _unit(s, "orddenom", meta), _kind(s)) for i, s in frfs
