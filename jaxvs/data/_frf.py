@@ -315,7 +315,9 @@ def _check_grid(frequency: Array) -> Array:
     f = np.asarray(frequency)
     if not np.all(np.isfinite(f)):
         raise ValueError(
-            f"FRFData: frequency has a non-finite value at index {int(np.argmax(~np.isfinite(f)))}."
+            "FRFData: frequency has a non-finite value at index "
+            f"{int(np.argmax(~np.isfinite(f)))}; remove that point (and the same point of H) "
+            "before building the FRFData."
         )
     if np.any(f < 0):
         raise ValueError(
@@ -326,8 +328,9 @@ def _check_grid(frequency: Array) -> Array:
     if np.any(steps <= 0):
         k = int(np.argmax(steps <= 0)) + 1
         raise ValueError(
-            f"FRFData: frequency is not strictly increasing: f[{k}] = {f[k]!r} Hz <= "
-            f"f[{k - 1}] = {f[k - 1]!r} Hz. Sort the grid (and H with it) and drop duplicates."
+            f"FRFData: frequency is not strictly increasing: f[{k}] = {float(f[k])!r} Hz <= "
+            f"f[{k - 1}] = {float(f[k - 1])!r} Hz. Sort the grid (and H with it) and drop "
+            "duplicates."
         )
     return frequency
 

@@ -249,8 +249,13 @@ class Record:
         if t is not None:
             t0, dt = _uniform_time_base(t, n, float(time_rtol))
         else:
-            dt = float(dt)  # type: ignore[arg-type]
-            t0 = float(t0)
+            try:
+                dt, t0 = float(dt), float(t0)  # type: ignore[arg-type]
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"dt must be a positive finite sampling period [s] and t0 a time [s]; got "
+                    f"dt={dt!r}, t0={t0!r}. Pass numbers, e.g. dt=1e-3."
+                ) from None
             if not (math.isfinite(dt) and dt > 0):
                 raise ValueError(f"dt must be a positive finite sampling period [s], got {dt!r}.")
             if not math.isfinite(t0):
@@ -261,6 +266,13 @@ class Record:
                 f"The time base t0={t0!r} s, dt={dt!r} s over {n} samples does not fit in "
                 "float64 (the last time or the sampling frequency 1/dt is infinite); give dt "
                 "and t0 in seconds (e.g. dt=1e-3 for 1 kHz)."
+            )
+        if n > 1 and not dt > 4 * np.spacing(max(abs(t0), abs(end))):
+            # heuristic: 4 ulps keeps consecutive sample times distinct after rounding
+            raise ValueError(
+                f"The time base t0={t0!r} s is so large against dt={dt!r} s that consecutive "
+                "sample times are equal in float64; subtract the start time (t0=0) or give "
+                "dt and t0 in seconds."
             )
 
         unit_map: dict[str, str] = {}

@@ -49,7 +49,10 @@ def split_blocks(
     or when a block would be shorter than `min_samples`.
     """
     if not isinstance(record, Record):
-        raise TypeError(f"split_blocks() takes a Record, got {type(record).__name__}.")
+        raise TypeError(
+            f"split_blocks() takes a Record, got {type(record).__name__}; build one with "
+            "jaxvs.data.Record({name: values}, dt=...) or load it with jaxvs.data.load."
+        )
     fractions = [float(f) for f in fractions]
     if len(fractions) < 2:
         raise ValueError(f"split_blocks() needs at least two fractions, got {fractions}.")
@@ -118,7 +121,10 @@ def split_experiments(
         if not isinstance(index, int):
             raise TypeError(f"validation indices must be integers, got {index!r}.")
         if not -n <= index < n:
-            raise ValueError(f"validation index {index} is out of range for {n} records.")
+            raise ValueError(
+                f"validation index {index} is out of range for {n} records; use an index "
+                f"in {-n}..{n - 1}."
+            )
         normalised.append(index % n)
     if len(set(normalised)) != len(normalised):
         raise ValueError(f"validation repeats an experiment: {indices}.")
