@@ -450,13 +450,6 @@ CASES: list[Case] = [
         exc=AttributeError,
         match=r"immutable; use with_signal",
     ),
-    _r(
-        "iterate",
-        "iterating over a record",
-        lambda: list(_rec()),
-        exc=TypeError,
-        match=r"not iterable",
-    ),
 ]
 
 

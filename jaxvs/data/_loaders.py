@@ -159,7 +159,10 @@ def _build(
             )
         signals = {name: signals[name] for name in names}
     if not signals:
-        raise ValueError(f"{source} holds no signal besides the time column {time!r}.")
+        raise ValueError(
+            f"{source} holds no signal besides the time column {time!r}; save the measured "
+            "signals in the same file (one column or array per signal)."
+        )
     kept_units = {name: unit for name, unit in units.items() if name in signals and unit}
     try:
         if time in columns:
@@ -256,7 +259,10 @@ def _decode_json(text: Any, what: str, source: str) -> Any:
     try:
         return json.loads(str(text))
     except json.JSONDecodeError as error:
-        raise ValueError(f"{source}: the stored {what} are not valid JSON ({error}).") from None
+        raise ValueError(
+            f"{source}: the stored {what} are not valid JSON ({error}); correct them or "
+            "delete them (jaxvs writers store them as JSON)."
+        ) from None
 
 
 # --- dispatch --------------------------------------------------------------------------------
@@ -503,10 +509,14 @@ def load_csv(
         if not name or "[" in name or "]" in name:
             raise ValueError(
                 f"{source}, line {first + 1}: header cell {i + 1} ({cell!r}) is not "
-                "'name' or 'name [unit]' (or 'name (unit)', 'name/unit')."
+                "'name' or 'name [unit]' (or 'name (unit)', 'name/unit'); give every column a "
+                "name."
             )
         if name in column_names:
-            raise ValueError(f"{source}: column name {name!r} appears twice in the header.")
+            raise ValueError(
+                f"{source}: column name {name!r} appears twice in the header; rename one of "
+                "the columns."
+            )
         column_names.append(name)
         if unit:
             units[name] = unit
@@ -518,7 +528,8 @@ def load_csv(
         if len(row) != len(column_names):
             raise ValueError(
                 f"{source}, line {line}: {len(row)} cells but the header has "
-                f"{len(column_names)} columns."
+                f"{len(column_names)} columns; every row needs one cell per column (check for "
+                "a missing cell, an extra delimiter or a truncated line)."
             )
         parsed = []
         for name, cell in zip(column_names, row):
@@ -531,7 +542,10 @@ def load_csv(
                 ) from None
         values.append(parsed)
     if not values:
-        raise ValueError(f"{source} has a header but no data rows.")
+        raise ValueError(
+            f"{source} has a header but no data rows; the file is empty below the header "
+            "(export the measurement again)."
+        )
     table = np.asarray(values, dtype=np.float64)
     columns = {name: table[:, i] for i, name in enumerate(column_names)}
     return _build(
@@ -823,7 +837,10 @@ def load_hdf5(
     try:
         handle = h5py.File(file, "r")
     except OSError as error:
-        raise ValueError(f"{source} cannot be read as HDF5 ({error}).") from None
+        raise ValueError(
+            f"{source} cannot be read as HDF5 ({error}). Check that the file is complete and "
+            "an HDF5 file; copy or export it again."
+        ) from None
     with handle:
 
         def visit(group: Any, prefix: str) -> None:

@@ -107,7 +107,10 @@ def _uniform_time_base(t: Any, n: int, rtol: float) -> tuple[float, float]:
     bad = ~np.isfinite(time)
     if bad.any():
         index = int(np.argmax(bad))
-        raise ValueError(f"The time vector has a non-finite value at sample {index}.")
+        raise ValueError(
+            f"The time vector has a non-finite value at sample {index}; remove that sample "
+            "(from the signals too), or pass dt=... instead of t when the sampling is uniform."
+        )
     steps = np.diff(time)
     not_increasing = steps <= 0
     if not_increasing.any():
@@ -183,7 +186,7 @@ class Record:
             if names is not None:
                 raise ValueError(
                     "names=... is only used with a 2-D array of signals; with a mapping the "
-                    "keys are the names."
+                    "keys are the names, so drop names=."
                 )
             items = list(signals.items())
         else:
@@ -282,7 +285,8 @@ class Record:
             for name, unit in units.items():
                 if name not in data:
                     raise ValueError(
-                        f"units given for unknown signal {name!r}; available signals: {list(data)}."
+                        f"units given for unknown signal {name!r}; available signals: "
+                        f"{list(data)}. Give units only for signals of the record."
                     )
                 if unit is None:
                     continue
@@ -500,7 +504,8 @@ class Record:
         begin, end, _ = slice(start, stop).indices(self._n)
         if end <= begin:
             raise ValueError(
-                f"slice({start}, {stop}) selects no samples of a record with {self._n} samples."
+                f"slice({start}, {stop}) selects no samples of a record with {self._n} "
+                f"samples; give start < stop within 0..{self._n}."
             )
         data = {name: values[begin:end] for name, values in self._signals.items()}
         return Record._trusted(
@@ -529,7 +534,7 @@ class Record:
         if end <= begin:
             raise ValueError(
                 f"window({t_start}, {t_end}) holds no sample; the record spans "
-                f"[{self._t0:g}, {self._t0 + self.duration:g}] s."
+                f"[{self._t0:g}, {self._t0 + self.duration:g}] s; choose times inside it."
             )
         return self.slice(begin, end)
 

@@ -128,7 +128,10 @@ def _read(path: str | os.PathLike) -> tuple[Path, list[dict]]:
     for s, t in zip(sets, types):
         s.setdefault("type", t)
     if not sets:
-        raise ValueError(f"{path}: the file holds no UFF dataset.")
+        raise ValueError(
+            f"{path}: the file holds no UFF dataset (no block between '    -1' lines); check "
+            "that it is a universal file (.uff/.unv) and complete."
+        )
     _check_complete(path, sets)
     return path, sets
 
@@ -246,7 +249,10 @@ def _select(sets: list[dict], index: Sequence[int] | None, path: Path) -> list[t
     index = list(index)
     bad = [i for i in index if not 0 <= i < len(sets)]
     if bad:
-        raise ValueError(f"{path}: dataset index {bad} out of range (the file has {len(sets)}).")
+        raise ValueError(
+            f"{path}: dataset index {bad} out of range (the file has {len(sets)}); use "
+            f"indices 0..{len(sets) - 1} (see jaxvs.data.uff_datasets)."
+        )
     return [numbered[i] for i in index]
 
 
@@ -267,7 +273,11 @@ def _functions(path: Path, sets, index, skip_unsupported, wanted: tuple[int, ...
     picked = [(i, s) for i, s in chosen if int(s["func_type"]) in wanted]
     if not picked:
         found = sorted({_FUNC_NAMES.get(f, str(f)) for f in funcs}) or ["no dataset 58"]
-        raise ValueError(f"{path}: no {what} in the file (found: {', '.join(found)}).")
+        other = "load_uff_frf" if what == "time response" else "load_uff_record"
+        raise ValueError(
+            f"{path}: no {what} in the file (found: {', '.join(found)}); read the "
+            f"datasets it holds with {other} (or jaxvs.data.load / load_frf)."
+        )
     return picked
 
 
