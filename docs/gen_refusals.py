@@ -176,9 +176,7 @@ def page(rows: list[dict], bad: dict[str, str]) -> str:
         ]
         for r in group:
             message = cell(r["message"]) if r["outcome"] == "refused" else "*(handled correctly)*"
-            lines.append(
-                f"| `{r['id']}` | `{r['entry']}` | {cell(r['input'], 200)} | {message} |"
-            )
+            lines.append(f"| `{r['id']}` | `{r['entry']}` | {cell(r['input'], 200)} | {message} |")
         lines.append("")
     if bad:
         lines += ["## Rows that failed in this run", ""]
