@@ -84,11 +84,8 @@ def junit_outcomes(junit: Path) -> dict[str, str]:
 def clean_message(message: str) -> str:
     """The user-facing sentence of an error (equinox prefixes runtime errors under jit
     with a stack note; the message proper is its last paragraph)."""
-    if "EquinoxRuntimeError" in message or "Above is the stack" in message:
-        parts = [p.strip() for p in message.split("\n\n") if p.strip()]
-        keep = [p for p in parts if not p.startswith(("Above is the stack", "---", "An error"))]
-        message = keep[-1] if keep else message
-        message = message.split("EquinoxRuntimeError: ")[-1]
+    if "EquinoxRuntimeError: " in message:
+        message = message.split("EquinoxRuntimeError: ", 1)[1].split("\n\n---", 1)[0]
     return " ".join(message.split())
 
 
