@@ -51,7 +51,7 @@ def first_order(T0=15.0, k=1.0, T1=1.0):
 def test_nonfinite_data():
     y = Y.copy()
     y[7] = np.nan
-    with pytest.raises(ValueError, match=r"non-finite value\(s\) \(first at index \(7,\)\)"):
+    with pytest.raises(ValueError, match=r"non-finite value\(s\), the first at index \(7,\)"):
         jaxvs.calibrate(first_order(), {"t": T, "y": y}, CURVE)
     with pytest.raises(ValueError, match="'y' has 1 non-finite"):
         jaxvs.calibrate(first_order(), {"u": np.ones(40), "y": y, "dt": 0.1}, SimulationError())

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
-from .._misc import as_real
+from .._misc import as_real, concrete
 
 __all__ = [
     "AbstractParameter",
@@ -94,14 +94,6 @@ def unwrap(tree: PyTree) -> PyTree:
         return x
 
     return jax.tree_util.tree_map(_unwrap_node, tree, is_leaf=is_parameter)
-
-
-def _concrete(x: Any) -> np.ndarray | None:
-    """`x` as a numpy array when it is concrete, `None` under tracing."""
-    try:
-        return np.asarray(x)
-    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
-        return None
 
 
 class Fixed(AbstractParameter):
@@ -189,7 +181,7 @@ def positive(x: ArrayLike, *, transform: Literal["log", "softplus"] = "log") -> 
         "positive: the initial value must be > 0 to be reparametrised; start from a "
         "small positive guess instead of 0 or a negative value."
     )
-    xc = _concrete(x)
+    xc = concrete(x)
     if xc is not None and not np.all(xc > 0):
         raise ValueError(msg + f" Got {xc}.")
     x = eqx.error_if(x, ~(x > 0), msg)
@@ -216,7 +208,7 @@ def bounded(x: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> Bounded:
     x = as_real(x, "bounded")
     lo = jnp.broadcast_to(jnp.asarray(lo, x.dtype), x.shape)
     hi = jnp.broadcast_to(jnp.asarray(hi, x.dtype), x.shape)
-    xc, loc, hic = _concrete(x), _concrete(lo), _concrete(hi)
+    xc, loc, hic = concrete(x), concrete(lo), concrete(hi)
     if loc is not None and hic is not None and not np.all(loc < hi):
         raise ValueError(f"bounded: need lo < hi; got lo={loc}, hi={hic}.")
     msg = (
@@ -313,7 +305,7 @@ def stable_denominator(den: ArrayLike) -> StableDenominator:
     to the left half-plane first, as `fit_rational` does, or start from a stable guess)
     or lies at 0; `TypeError` under tracing.
     """
-    den_c = _concrete(den)
+    den_c = concrete(den)
     if den_c is None:
         raise TypeError(
             "stable_denominator needs a concrete denominator (it finds the roots with "
