@@ -336,12 +336,11 @@ def _check_grid(frequency: Array) -> Array:
 
 
 def _check_finite(x: Array, name: str) -> Array:
-    return check_finite(
-        x,
-        f"FRFData: {name}",
-        "Remove those frequencies (e.g. a DC bin where the input has no power, so that the "
-        "estimate divided by a zero spectrum) before building the FRFData.",
+    fix = (
+        "Remove those frequencies (e.g. a DC bin where the input has no power, which makes an "
+        "estimate divide by a zero spectrum) before building the FRFData."
     )
+    return check_finite(x, f"FRFData: {name}", fix)
 
 
 def _check_coherence_range(c: Array) -> Array:
