@@ -150,10 +150,10 @@ CASES: list[Case] = [
     _m(
         "tf-nan-den-jit",
         "RationalTF",
-        "den [1, nan] built from a traced value under jit",
+        "den [1, nan] built from a traced value under jit (refused when simulated)",
         lambda: _jit_build(_tf, NAN),
         exc=ERR,
-        match=r"RationalTF: den contains NaN or inf",
+        match=r"simulate: the model's parameters are NaN or inf.*give finite parameters",
     ),
     _m(
         "tf-zero-num",
@@ -225,26 +225,26 @@ CASES: list[Case] = [
     _m(
         "modal-nan-omega-jit",
         "ModalModel",
-        "omega_n = [nan] traced under jit",
+        "omega_n = [nan] traced under jit (refused when simulated)",
         lambda: _jit_build(_modal_w, NAN),
         exc=ERR,
-        match=r"ModalModel: omega_n contains NaN or inf",
+        match=r"simulate: the model's parameters are NaN or inf.*give finite parameters",
     ),
     _m(
         "modal-nan-zeta-jit",
         "ModalModel",
-        "zeta = [nan] traced under jit",
+        "zeta = [nan] traced under jit (refused when simulated)",
         lambda: _jit_build(_modal_z, NAN),
         exc=ERR,
-        match=r"ModalModel: zeta contains NaN or inf",
+        match=r"simulate: the model's parameters are NaN or inf.*give finite parameters",
     ),
     _m(
         "modal-nan-residue-jit",
         "ModalModel",
-        "residues = [nan] traced under jit",
+        "residues = [nan] traced under jit (refused when simulated)",
         lambda: _jit_build(_modal_r, NAN),
         exc=ERR,
-        match=r"ModalModel: residues contains NaN or inf",
+        match=r"simulate: the model's parameters are NaN or inf.*give finite parameters",
     ),
     # --- StateSpace ----------------------------------------------------------------------
     _m(
@@ -285,10 +285,10 @@ CASES: list[Case] = [
     _m(
         "ss-nan-a-jit",
         "StateSpace",
-        "A = [[nan]] traced under jit",
+        "A = [[nan]] traced under jit (refused when simulated)",
         lambda: _jit_build(_ss, NAN),
         exc=ERR,
-        match=r"StateSpace: A contains NaN or inf",
+        match=r"simulate: the model's parameters are NaN or inf.*give finite parameters",
     ),
     # --- thermal and drive models --------------------------------------------------------
     _m(
