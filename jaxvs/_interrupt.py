@@ -23,6 +23,7 @@ Only the standard library is imported here: this runs before JAX is loaded.
 
 from __future__ import annotations
 
+import _thread
 import contextlib
 import os
 import shutil
@@ -50,6 +51,9 @@ class _State:
         self.pending = False
         self.finished = False
         self.lock = threading.RLock()
+        self.echo_lock = threading.Lock()
+        self.echo_handler = 0  # re-delivered interrupts (see _unraisable), not new Ctrl-Cs
+        self.echo_watcher = 0
 
     def reset(self, command: str) -> None:
         self.command = command
@@ -101,12 +105,31 @@ def install() -> None:
     state.installed = True
     state._sockets = (reader, writer)  # type: ignore[attr-defined] # keep them open
     signal.signal(signal.SIGINT, _on_sigint)
+    state._unraisable = sys.unraisablehook  # type: ignore[attr-defined]
+    sys.unraisablehook = _unraisable
     threading.Thread(target=_watch, args=(state, reader), name="jaxvs-sigint", daemon=True).start()
+
+
+def _unraisable(unraisable) -> None:
+    """A `KeyboardInterrupt` raised where Python cannot propagate it (a garbage-collector
+    callback of XLA, a `__del__`) is delivered again at the next bytecode instead of being
+    printed as "Exception ignored ... Traceback"."""
+    state = _state
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and not state.finished:
+        with state.echo_lock:
+            state.echo_handler += 1
+            state.echo_watcher += 1
+        _thread.interrupt_main()  # runs _on_sigint again (and wakes the watcher)
+        return
+    state._unraisable(unraisable)  # type: ignore[attr-defined]
 
 
 def _on_sigint(signum, frame) -> None:
     state = _state
-    state.signals += 1
+    with state.echo_lock:
+        echo = state.echo_handler > 0
+        state.echo_handler -= echo
+    state.signals += not echo
     if state.deferring:  # renaming a report into place: finish that first
         state.pending = True
         return
@@ -129,6 +152,10 @@ def _watch(state: _State, reader: socket.socket) -> None:
         except OSError:  # pragma: no cover - socket closed at exit
             return
         n = data.count(bytes([signal.SIGINT]))
+        with state.echo_lock:
+            echoes = min(n, state.echo_watcher)
+            state.echo_watcher -= echoes
+        n -= echoes
         if not n:
             continue
         if deadline is None and n == 1:
@@ -198,6 +225,12 @@ def line(command: str | None = None, stage: str | None = None) -> str:
     """The one line printed on an interrupt: what was and was not written."""
     state = _state
     cmd = command or state.command
+    if (
+        cmd == "jaxvs"
+        and len(sys.argv) > 1
+        and sys.argv[1] in ("demo", "diagnose", "check", "design")
+    ):
+        cmd = sys.argv[1]  # interrupted while starting, before main() parsed the command
     during = stage or state.stage
     head = f"jaxvs {cmd}: interrupted while {during}" if cmd != "jaxvs" else "jaxvs: interrupted"
     done = list(state.written)
@@ -218,6 +251,16 @@ def _discard(state: _State) -> None:
         shutil.rmtree(path, ignore_errors=True)
         for leftover in path.parent.glob(f".{path.name}.*"):  # temporary folders of a save
             shutil.rmtree(leftover, ignore_errors=True)
+
+
+def discard_staging() -> None:
+    """Remove the staging folders of a run that ended with an error."""
+    _discard(_state)
+
+
+def note(text: str) -> None:
+    """A long step's own account of how far it got (a `Progress` that was interrupted)."""
+    _state.stage = text
 
 
 def abort(message: str | None = None) -> None:
@@ -256,3 +299,6 @@ def finish(code: int, message: str) -> int:
         _discard(state)
         _exit(message, code)
     return code  # pragma: no cover
+
+
+install_for_command()  # at import, which `jaxvs/__init__.py` does first

@@ -196,7 +196,12 @@ class Progress:
             )
             self.interrupted = True
             self.log("interrupted", logging.WARNING)
-            print(self.message, file=sys.stderr)
+            from . import _interrupt
+
+            if _interrupt.installed():  # the jaxvs command prints one line for everything
+                _interrupt.note(f"{self.description} ({done} {self.unit}s done)")
+            else:
+                print(self.message, file=sys.stderr)
             if self.on_interrupt == "return":
                 return True
             raise Interrupted(self.message) from None
