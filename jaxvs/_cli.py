@@ -136,7 +136,7 @@ def _parser() -> argparse.ArgumentParser:
         epilog="Exit codes: 0 done, 2 user error, 3 not identifiable, 130 interrupted.",
     )
     p.add_argument("--version", action="version", version=f"jaxvs {__version__}")
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, metavar="{demo,diagnose,check,design}")
     demo = sub.add_parser(
         "demo",
         help="end-to-end run on the embedded machine-structure twin (no download)",
@@ -278,7 +278,15 @@ def _load(paths: list[str], args) -> list[Any]:
     out = []
     for text in paths:
         _interrupt.stage(f"loading {text}")
-        loaded = load(text, delimiter=args.delimiter, decimal=args.decimal, encoding=args.encoding)
+        try:
+            loaded = load(
+                text, delimiter=args.delimiter, decimal=args.decimal, encoding=args.encoding
+            )
+        except (ValueError, KeyError) as err:
+            message = _one_line(err)
+            if Path(text).name not in message:  # e.g. a Record's own check: say which file
+                raise UsageError(f"{text}: {message}") from err
+            raise
         recs = loaded if isinstance(loaded, list) else [loaded]
         base = Path(text).name
         for k, rec in enumerate(recs):
@@ -306,7 +314,7 @@ def _x64() -> None:
 def _check(args) -> int:
     _input_files(args.data, "DATA")
     options = _options(args)
-    folder = ReportFolder(args.out, args.data) if args.out else None
+    folder = ReportFolder(args.out, args.data) if args.out is not None else None
     _x64()
     import jaxvs
 
@@ -486,7 +494,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = _parser().parse_args(argv)
     except UsageError as err:
-        print(f"jaxvs: error: {_one_line(err)}", file=sys.stderr)
+        message = _one_line(err)
+        command = next((a for a in argv if a in _COMMANDS), None)
+        if command:  # argparse reports unknown options at the top level
+            message = message.replace("'jaxvs --help'", f"'jaxvs {command} --help'")
+        print(f"jaxvs: error: {message}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         return _interrupt.finish(EXIT_INTERRUPTED, "jaxvs: interrupted; nothing was written.")
