@@ -44,24 +44,24 @@ def _int_at_least(lo: int) -> Callable[[str], int]:
     return parse
 
 
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects a positive number, got {text!r}") from None
-    if not (value > 0 and value < float("inf")):
-        raise argparse.ArgumentTypeError(f"expects a positive finite number, got {text!r}")
-    return value
+def _float_in(lo: float, hi: float, what: str) -> Callable[[str], float]:
+    """An argparse type: a float in the open interval (lo, hi)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = float("nan")
+        if not lo < value < hi:  # also refuses nan
+            raise argparse.ArgumentTypeError(f"expects {what}, got {text!r}")
+        return value
+
+    parse.__name__ = what
+    return parse
 
 
-def _fraction(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects a number in (0, 1), got {text!r}") from None
-    if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"expects a number in (0, 1) such as 0.3, got {text!r}")
-    return value
+_positive_float = _float_in(0.0, float("inf"), "a positive finite number")
+_fraction = _float_in(0.0, 1.0, "a number in (0, 1) such as 0.3")
 
 
 def _character(text: str) -> str:
@@ -401,24 +401,20 @@ def _design(args) -> int:
             return list(paths)  # design reads sparse (NaN) targets from the files itself
         return _load(paths, args)
 
+    _interrupt.stage("loading the data")
     cal = records(args.data)
     val = records(args.validate) if args.validate else None
     _interrupt.stage("searching designs")
     _interrupt.set_grace(15.0)  # an interrupted search still writes its ranked designs
+    same = ("budget", "target_samples", "max_inputs", "max_delay", "inits", "holdout", "seed")
     report = jaxvs.design(
         cal,
         target=args.target,
         inputs=inputs,
         validation=val,
-        budget=args.budget,
-        target_samples=args.target_samples,
-        max_inputs=args.max_inputs,
-        max_delay=args.max_delay,
         hidden=hidden,
-        inits=args.inits,
-        holdout=args.holdout,
-        seed=args.seed,
         progress=False if args.quiet else None,
+        **{name: getattr(args, name) for name in same},
     )
     interrupted = bool(report["interrupted"])
     _interrupt.stage("writing the partial report" if interrupted else "writing the report")
@@ -510,22 +506,27 @@ def main(argv: list[str] | None = None) -> int:
         return _COMMANDS[args.command](args)
     except KeyboardInterrupt:
         return _interrupt.finish(EXIT_INTERRUPTED, _interrupt.line())
-    except _USER_ERRORS as err:
-        _interrupt.discard_staging()
-        if debug:
-            traceback.print_exc()
+    except Exception:
+        if _interrupt.was_interrupted():  # the interrupt, wrapped by XLA on its way out
+            return _interrupt.finish(EXIT_INTERRUPTED, _interrupt.line())
+        return _error(debug)
+
+
+def _error(debug: bool) -> int:
+    """One line for the exception being handled: a user error (2) or a bug (1)."""
+    err = sys.exc_info()[1]
+    _interrupt.discard_staging()
+    if debug:
+        traceback.print_exc()
+    if isinstance(err, _USER_ERRORS):
         print(f"jaxvs: error: {_one_line(err)}", file=sys.stderr)
         return EXIT_USAGE
-    except Exception as err:  # a bug: one line, the traceback with --debug
-        _interrupt.discard_staging()
-        if debug:
-            traceback.print_exc()
-        print(
-            f"jaxvs: internal error: {type(err).__name__}: {_one_line(err)} (run again with "
-            "--debug for the traceback, and please report it)",
-            file=sys.stderr,
-        )
-        return EXIT_INTERNAL
+    print(  # a bug: one line, the traceback with --debug
+        f"jaxvs: internal error: {type(err).__name__}: {_one_line(err)} (run again with "
+        "--debug for the traceback, and please report it)",
+        file=sys.stderr,
+    )
+    return EXIT_INTERNAL
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -54,6 +54,7 @@ class _State:
         self.echo_lock = threading.Lock()
         self.echo_handler = 0  # re-delivered interrupts (see _unraisable), not new Ctrl-Cs
         self.echo_watcher = 0
+        self.redeliver = False
 
     def reset(self, command: str) -> None:
         self.command = command
@@ -112,16 +113,13 @@ def install() -> None:
 
 def _unraisable(unraisable) -> None:
     """A `KeyboardInterrupt` raised where Python cannot propagate it (a garbage-collector
-    callback of XLA, a `__del__`) is delivered again at the next bytecode instead of being
-    printed as "Exception ignored ... Traceback"."""
-    state = _state
-    if isinstance(unraisable.exc_value, KeyboardInterrupt) and not state.finished:
-        with state.echo_lock:
-            state.echo_handler += 1
-            state.echo_watcher += 1
-        _thread.interrupt_main()  # runs _on_sigint again (and wakes the watcher)
+    callback of XLA, a `__del__`) is delivered again by the watcher thread instead of being
+    printed as "Exception ignored ... Traceback". (As little Python as possible runs here:
+    an interrupt raised inside this hook would be printed.)"""
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and not _state.finished:
+        _state.redeliver = True
         return
-    state._unraisable(unraisable)  # type: ignore[attr-defined]
+    _state._unraisable(unraisable)  # type: ignore[attr-defined]
 
 
 def _on_sigint(signum, frame) -> None:
@@ -142,13 +140,11 @@ def _on_sigint(signum, frame) -> None:
 def _watch(state: _State, reader: socket.socket) -> None:
     deadline = None
     while True:
-        timeout = None if deadline is None else max(0.0, deadline - time.monotonic())
-        reader.settimeout(timeout)
+        reader.settimeout(None if deadline is None else 0.05)
         try:
             data = reader.recv(64)
         except TimeoutError:
-            abort()  # the main thread did not finish in time
-            return
+            data = b""
         except OSError:  # pragma: no cover - socket closed at exit
             return
         n = data.count(bytes([signal.SIGINT]))
@@ -156,12 +152,21 @@ def _watch(state: _State, reader: socket.socket) -> None:
             echoes = min(n, state.echo_watcher)
             state.echo_watcher -= echoes
         n -= echoes
-        if not n:
-            continue
-        if deadline is None and n == 1:
+        if n and deadline is None and n == 1:
             deadline = time.monotonic() + state.grace
-        else:
-            abort()
+        elif n:
+            abort()  # a second Ctrl-C: now
+            return
+        if deadline is None:
+            continue
+        if state.redeliver and not state.finished:  # swallowed by a callback: again
+            state.redeliver = False
+            with state.echo_lock:
+                state.echo_handler += 1
+                state.echo_watcher += 1
+            _thread.interrupt_main()
+        if time.monotonic() > deadline:
+            abort()  # the main thread did not finish in time
             return
 
 
@@ -251,6 +256,12 @@ def _discard(state: _State) -> None:
         shutil.rmtree(path, ignore_errors=True)
         for leftover in path.parent.glob(f".{path.name}.*"):  # temporary folders of a save
             shutil.rmtree(leftover, ignore_errors=True)
+
+
+def was_interrupted() -> bool:
+    """Whether Ctrl-C was pressed (an exception that followed it may be the interrupt
+    wrapped by XLA, e.g. a `RuntimeError` from inside a callback)."""
+    return _state.signals > 0
 
 
 def discard_staging() -> None:

@@ -95,11 +95,11 @@ class ReportFolder:
                 )
         self.staging = self.out.parent / f".{self.out.name}.partial-{os.getpid()}"
         self.committed = False
+        _interrupt.report_folder(self.out, self.existed, self.staging)
 
     def prepare(self) -> Path:
         """Create the parent folders and return the staging path (not created: a report's
-        `save` creates it); an interrupt from now on removes it."""
-        _interrupt.report_folder(self.out, self.existed, self.staging)
+        `save` creates it); an interrupt removes it."""
         self.out.parent.mkdir(parents=True, exist_ok=True)
         self.discard()
         return self.staging

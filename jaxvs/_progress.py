@@ -195,10 +195,12 @@ class Progress:
                 f"({self.elapsed:.1f} s)"
             )
             self.interrupted = True
-            self.log("interrupted", logging.WARNING)
             from . import _interrupt
 
-            if _interrupt.installed():  # the jaxvs command prints one line for everything
+            # The jaxvs command prints one line for everything (logging's last-resort
+            # handler would print a WARNING as a second line).
+            self.log("interrupted", logging.INFO if _interrupt.installed() else logging.WARNING)
+            if _interrupt.installed():
                 _interrupt.note(f"{self.description} ({done} {self.unit}s done)")
             else:
                 print(self.message, file=sys.stderr)
