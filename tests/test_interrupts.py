@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -205,3 +206,88 @@ def test_an_earlier_report_is_kept_until_the_new_one_is_complete(files, tmp_path
     assert "still holds the earlier report" in said, said
     assert json.loads((old / "report.json").read_text()) == {"old": True}  # untouched
     _out_absent_or_complete(cwd)
+
+
+_PYTHON_API = r"""
+import json, os, signal, sys, threading, time
+import jax
+jax.config.update("jax_enable_x64", True)
+import equinox as eqx, jax.numpy as jnp, numpy as np
+import jaxvs
+from jaxvs.calibration import EquationError
+
+def ctrl_c_after(seconds):
+    threading.Timer(seconds, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+
+def heavy(point, args):  # a slow point: 60 x 60 eigenvalues, enough to span several chunks
+    a = point["a"] * args + jnp.eye(60)
+    return {"v": jnp.sort(jnp.abs(jnp.linalg.eigvals(a)))}
+
+grid = {"a": jnp.linspace(0.1, 1.0, 4096)}
+args = jnp.asarray(np.random.default_rng(0).normal(size=(60, 60)))
+run = lambda: jaxvs.sweep(heavy, grid, args, chunk_size=64, progress=False)["v"]
+reference = np.asarray(run())
+out = {}
+ctrl_c_after(1.0)
+t0 = time.monotonic()
+try:
+    run()
+    out["sweep"] = {"caught": None}
+except KeyboardInterrupt as e:
+    out["sweep"] = {"caught": type(e).__name__, "message": str(e),
+                    "seconds": time.monotonic() - t0}
+out["sweep"]["same_after"] = bool(np.array_equal(np.asarray(run()), reference))
+
+class Curve(eqx.Module):
+    T0: jax.Array
+    k: jax.Array
+    T1: jax.Array
+    def __call__(self, t):
+        return self.T0 + self.k * (1 - jnp.exp(-t / self.T1))
+
+t = np.linspace(0.0, 10.0, 400_000)
+y = 20 + 5 * (1 - np.exp(-t / 2)) + 0.01 * np.random.default_rng(1).normal(size=t.size)
+guess = Curve(jnp.asarray(15.0), jnp.asarray(1.0), jnp.asarray(1.0))
+residual = EquationError(lambda m, d: m(d["t"]) - d["y"])
+fit = lambda: jaxvs.calibrate(guess, {"t": t, "y": y}, residual)
+ref = fit()
+for delay in (0.05, 0.3):
+    ctrl_c_after(delay)
+    t0 = time.monotonic()
+    try:
+        fit()
+        time.sleep(2.0)  # the interrupt lands here when the fit was faster
+        caught = None
+    except KeyboardInterrupt as e:
+        caught = type(e).__name__
+    again = fit()
+    same = all(bool(jnp.array_equal(getattr(again.model, f), getattr(ref.model, f)))
+               for f in ("T0", "k", "T1"))
+    out[f"calibrate_{delay}"] = {"caught": caught, "seconds": time.monotonic() - t0,
+                                 "same_after": same}
+print(json.dumps(out))
+"""
+
+
+def test_python_api_interrupts_propagate_and_leave_no_state(tmp_path):
+    """Ctrl-C in a long `sweep` and `calibrate` in a user's program: a `KeyboardInterrupt`
+    (for `sweep` the `jaxvs.Interrupted` subclass, saying how far it got) reaches the
+    program, and the same call afterwards gives bit-identical results (no state left
+    behind in caches or compiled functions)."""
+    script = tmp_path / "prog.py"
+    script.write_text(_PYTHON_API)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(_REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    proc = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr and "Exception ignored" not in proc.stderr
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    print(out)
+    assert out["sweep"]["caught"] == "Interrupted", out
+    assert re.search(r"sweep interrupted after \d+/4096 points", out["sweep"]["message"])
+    assert out["sweep"]["same_after"]
+    for delay in ("0.05", "0.3"):
+        assert out[f"calibrate_{delay}"]["caught"] == "KeyboardInterrupt", out
+        assert out[f"calibrate_{delay}"]["same_after"], out
