@@ -149,225 +149,232 @@ def _base(cmd: str, data: list, tmp: Path) -> list:
 CASES: list[Case] = []
 DATA_COMMANDS = ("diagnose", "check", "design")
 
+
 # --- paths, for every sub-command that reads data ---------------------------------------------
+def _file(name: str, content: str | bytes) -> Callable[[Path], Path]:
+    """A data file with exactly this content."""
+
+    def make(tmp: Path) -> Path:
+        (tmp / name).write_bytes(content if isinstance(content, bytes) else content.encode())
+        return tmp / name
+
+    return make
+
+
+def _edited(edit: Callable[[str], str]) -> Callable[[Path], Path]:
+    """The valid drive CSV with one edit of its text."""
+
+    def make(tmp: Path) -> Path:
+        p = drive_csv(tmp)
+        p.write_text(edit(p.read_text()))
+        return p
+
+    return make
+
+
+def _mkdir(tmp: Path, *names: str, file: str | None = None) -> Path:
+    d = tmp.joinpath(*names)
+    d.mkdir(parents=True)
+    if file:
+        (d / file).write_text("x")
+    return d
+
+
+def _a_file(tmp: Path) -> Path:
+    (tmp / "f.txt").write_text("x")
+    return tmp / "f.txt"
+
+
+def _symlink(tmp: Path) -> Path:
+    (tmp / "l.csv").symlink_to(tmp / "gone.csv")
+    return tmp / "l.csv"
+
+
+# (id, input, data file(s) maker, extra args or --out maker, match): --out defaults to tmp/o
+_PER_COMMAND = [
+    (
+        "missing-file",
+        "a data file that does not exist",
+        lambda tmp: tmp / "nope.csv",
+        None,
+        r"nope\.csv: no such file.*check the path",
+    ),
+    (
+        "missing-file-hint",
+        "a misspelt data file next to real ones",
+        lambda tmp: (drive_csv(tmp, "run1.csv"), tmp / "rnu1.csv")[1],
+        None,
+        r"no such file \(files there: run1\.csv\)",
+    ),
+    (
+        "data-is-folder",
+        "a folder given as data",
+        lambda tmp: _mkdir(tmp, "d"),
+        None,
+        r"is a folder; give the data file\(s\) in it",
+    ),
+    (
+        "empty-file",
+        "an empty (0-byte) data file",
+        _file("e.csv", ""),
+        None,
+        r"is empty \(0 bytes\); give the complete file",
+    ),
+    (
+        "broken-symlink",
+        "a symbolic link to a file that was deleted",
+        _symlink,
+        None,
+        r"l\.csv: no such file.*check the path",
+    ),
+    (
+        "out-is-file",
+        "--out naming an existing file",
+        drive_csv,
+        _a_file,
+        r"--out .*f\.txt is a file, not a folder; give --out the name of a new folder",
+    ),
+    (
+        "out-under-file",
+        "--out inside a path whose parent is a file",
+        drive_csv,
+        lambda tmp: _a_file(tmp) / "sub",
+        r"is a file, so no folder can be made under it; give --out the name of a new folder",
+    ),
+    (
+        "out-unwritable",
+        "--out in a place nobody can write (/proc)",
+        drive_csv,
+        lambda tmp: "/proc/jaxvs-report",
+        r"cannot write in /proc.*in a folder you can write to",
+    ),
+    (
+        "out-foreign-folder",
+        "--out naming a non-empty folder that holds no jaxvs report",
+        drive_csv,
+        lambda tmp: _mkdir(tmp, "mine", file="notes.txt"),
+        r"folder with other files \(notes\.txt\) and no earlier jaxvs report.*or empty it",
+    ),
+    (
+        "out-holds-input",
+        "--out naming the folder that holds the data file",
+        lambda tmp: drive_csv(_mkdir(tmp, "d")),
+        lambda tmp: tmp / "d",
+        r"(holds the input file|no earlier jaxvs report).*new folder",
+    ),
+    (
+        "out-empty-string",
+        "--out ''",
+        drive_csv,
+        lambda tmp: "",
+        r"--out is empty; give the name of a folder",
+    ),
+    (
+        "unknown-flag",
+        "an option that does not exist (--bogus)",
+        drive_csv,
+        ["--bogus"],
+        r"unrecognized arguments: --bogus; see 'jaxvs \w+ --help'",
+    ),
+    (
+        "semicolon-csv",
+        "a ;-separated CSV with decimal commas",
+        lambda tmp: drive_csv(tmp, sep=";", decimal=","),
+        None,
+        r"semicolon-separated; pass .*--delimiter ';'.*--decimal ','",
+    ),
+    (
+        "decimal-comma",
+        "a ;-separated CSV with decimal commas read with --delimiter ';' only",
+        lambda tmp: drive_csv(tmp, sep=";", decimal=","),
+        ["--delimiter", ";"],
+        r"is not a number; it looks like a number with a decimal comma; pass .*--decimal ','",
+    ),
+    (
+        "quoted-decimal-comma",
+        'a comma-separated CSV with quoted decimal commas ("0,5")',
+        lambda tmp: drive_csv(tmp, decimal=","),
+        None,
+        r"decimal comma; pass .*--decimal ','",
+    ),
+    (
+        "latin1",
+        "a CSV saved in Latin-1 (a header 'Température')",
+        lambda tmp: write_csv(
+            tmp / "l1.csv", {**_drive_columns(), "Température": np.zeros(N)}, encoding="latin-1"
+        ),
+        None,
+        r"not utf-8 text \(byte 0xe9 on line 1\); re-save it as UTF-8.*--encoding",
+    ),
+    (
+        "binary-as-csv",
+        "a binary file named .csv",
+        _file("b.csv", bytes(range(256)) * 4),
+        None,
+        r"not a text file.*give a CSV text file",
+    ),
+    (
+        "truncated-csv",
+        "a CSV cut off in the middle of its last row",
+        _edited(lambda text: text[:-25]),
+        None,
+        r"cells but the header has 4 columns; complete or remove that line \(a truncated",
+    ),
+    (
+        "header-only",
+        "a CSV with a header and no rows",
+        _file("h.csv", "t,q,u\n"),
+        None,
+        r"has a header but no data rows; add one row per sample",
+    ),
+    (
+        "text-cell",
+        "a CSV with a text cell ('n/a') among the numbers",
+        _edited(lambda text: text.replace("\n0.01", "\nn/a", 1)),
+        None,
+        r"cell 'n/a' is not a number; every cell below the header must be numeric",
+    ),
+    (
+        "no-time-column",
+        "a CSV without a time column",
+        lambda tmp: write_csv(
+            tmp / "x.csv", {k: v for k, v in _drive_columns().items() if k != "t"}
+        ),
+        None,
+        r"has no time column 't'.*Name the time column 't'",
+    ),
+    (
+        "duplicate-column",
+        "a CSV whose header names a column twice",
+        lambda tmp: drive_csv(tmp, header="t,q,u,q"),
+        None,
+        r"column name 'q' appears twice",
+    ),
+    (
+        "unsupported-suffix",
+        "a .txt file",
+        _file("d.txt", "t q u\n"),
+        None,
+        r"Unsupported file type '\.txt'.*supported suffixes",
+    ),
+]
+
+
+def _per_command(cmd: str, data, extra) -> Callable[[Path], list]:
+    def make(tmp: Path) -> list:
+        args = _base(cmd, [data(tmp)], tmp)
+        if callable(extra):
+            return [*args[:-1], extra(tmp)]  # another --out
+        return [*args, *(extra or [])]
+
+    return make
+
+
 for cmd in DATA_COMMANDS:
-    entry = f"jaxvs {cmd}"
-    CASES += [
-        refused(
-            f"{cmd}-missing-file",
-            entry,
-            "a data file that does not exist",
-            lambda tmp, cmd=cmd: _base(cmd, [tmp / "nope.csv"], tmp),
-            r"nope\.csv: no such file.*check the path",
-        ),
-        refused(
-            f"{cmd}-missing-file-hint",
-            entry,
-            "a misspelt data file next to real ones",
-            lambda tmp, cmd=cmd: (drive_csv(tmp, "run1.csv"), _base(cmd, [tmp / "rnu1.csv"], tmp))[
-                1
-            ],
-            r"no such file \(files there: run1\.csv\)",
-        ),
-        refused(
-            f"{cmd}-data-is-folder",
-            entry,
-            "a folder given as data",
-            lambda tmp, cmd=cmd: ((tmp / "d").mkdir(), _base(cmd, [tmp / "d"], tmp))[1],
-            r"is a folder; give the data file\(s\) in it",
-        ),
-        refused(
-            f"{cmd}-empty-file",
-            entry,
-            "an empty (0-byte) data file",
-            lambda tmp, cmd=cmd: ((tmp / "e.csv").write_text(""), _base(cmd, [tmp / "e.csv"], tmp))[
-                1
-            ],
-            r"is empty \(0 bytes\); give the complete file",
-        ),
-        refused(
-            f"{cmd}-broken-symlink",
-            entry,
-            "a symbolic link to a file that was deleted",
-            lambda tmp, cmd=cmd: (
-                (tmp / "l.csv").symlink_to(tmp / "gone.csv"),
-                _base(cmd, [tmp / "l.csv"], tmp),
-            )[1],
-            r"l\.csv: no such file.*check the path",
-        ),
-        refused(
-            f"{cmd}-out-is-file",
-            entry,
-            "--out naming an existing file",
-            lambda tmp, cmd=cmd: [
-                *_base(cmd, [drive_csv(tmp)], tmp)[:-1],
-                (tmp / "f.txt", (tmp / "f.txt").write_text("x"))[0],
-            ],
-            r"--out .*f\.txt is a file, not a folder; give --out the name of a new folder",
-        ),
-        refused(
-            f"{cmd}-out-under-file",
-            entry,
-            "--out inside a path whose parent is a file",
-            lambda tmp, cmd=cmd: [
-                *_base(cmd, [drive_csv(tmp)], tmp)[:-1],
-                (tmp / "f.txt", (tmp / "f.txt").write_text("x"))[0] / "sub",
-            ],
-            r"is a file, so no folder can be made under it; give --out the name of a new folder",
-        ),
-        refused(
-            f"{cmd}-out-unwritable",
-            entry,
-            "--out in a place nobody can write (/proc)",
-            lambda tmp, cmd=cmd: [*_base(cmd, [drive_csv(tmp)], tmp)[:-1], "/proc/jaxvs-report"],
-            r"cannot write in /proc.*in a folder you can write to",
-        ),
-        refused(
-            f"{cmd}-out-foreign-folder",
-            entry,
-            "--out naming a non-empty folder that holds no jaxvs report",
-            lambda tmp, cmd=cmd: [
-                *_base(cmd, [drive_csv(tmp)], tmp)[:-1],
-                ((tmp / "mine").mkdir(), (tmp / "mine" / "notes.txt").write_text("x"), tmp)[2]
-                / "mine",
-            ],
-            r"folder with other files \(notes\.txt\) and no earlier jaxvs report.*or empty it",
-        ),
-        refused(
-            f"{cmd}-out-holds-input",
-            entry,
-            "--out naming the folder that holds the data file",
-            lambda tmp, cmd=cmd: [
-                *_base(cmd, [((tmp / "d").mkdir(), drive_csv(tmp / "d"))[1]], tmp)[:-1],
-                tmp / "d",
-            ],
-            r"(holds the input file|no earlier jaxvs report).*new folder",
-        ),
-        refused(
-            f"{cmd}-out-empty-string",
-            entry,
-            "--out ''",
-            lambda tmp, cmd=cmd: [*_base(cmd, [drive_csv(tmp)], tmp)[:-1], ""],
-            r"--out is empty; give the name of a folder",
-        ),
-        refused(
-            f"{cmd}-unknown-flag",
-            entry,
-            "an option that does not exist (--bogus)",
-            lambda tmp, cmd=cmd: [*_base(cmd, [drive_csv(tmp)], tmp), "--bogus"],
-            r"unrecognized arguments: --bogus; see 'jaxvs \w+ --help'",
-        ),
-        refused(
-            f"{cmd}-semicolon-csv",
-            entry,
-            "a ;-separated CSV with decimal commas",
-            lambda tmp, cmd=cmd: _base(cmd, [drive_csv(tmp, sep=";", decimal=",")], tmp),
-            r"semicolon-separated; pass .*--delimiter ';'.*--decimal ','",
-        ),
-        refused(
-            f"{cmd}-decimal-comma",
-            entry,
-            "a ;-separated CSV with decimal commas read with --delimiter ';' only",
-            lambda tmp, cmd=cmd: [
-                *_base(cmd, [drive_csv(tmp, sep=";", decimal=",")], tmp),
-                "--delimiter",
-                ";",
-            ],
-            r"is not a number; it looks like a number with a decimal comma; pass .*--decimal ','",
-        ),
-        refused(
-            f"{cmd}-quoted-decimal-comma",
-            entry,
-            'a comma-separated CSV with quoted decimal commas ("0,5")',
-            lambda tmp, cmd=cmd: _base(cmd, [drive_csv(tmp, decimal=",")], tmp),
-            r"decimal comma; pass .*--decimal ','",
-        ),
-        refused(
-            f"{cmd}-latin1",
-            entry,
-            "a CSV saved in Latin-1 (a header 'Température')",
-            lambda tmp, cmd=cmd: _base(
-                cmd,
-                [
-                    write_csv(
-                        tmp / "l1.csv",
-                        {**_drive_columns(), "Température": np.zeros(N)},
-                        encoding="latin-1",
-                    )
-                ],
-                tmp,
-            ),
-            r"not utf-8 text \(byte 0xe9 on line 1\); re-save it as UTF-8.*--encoding",
-        ),
-        refused(
-            f"{cmd}-binary-as-csv",
-            entry,
-            "a binary file named .csv",
-            lambda tmp, cmd=cmd: (
-                (tmp / "b.csv").write_bytes(bytes(range(256)) * 4),
-                _base(cmd, [tmp / "b.csv"], tmp),
-            )[1],
-            r"not a text file.*give a CSV text file",
-        ),
-        refused(
-            f"{cmd}-truncated-csv",
-            entry,
-            "a CSV cut off in the middle of its last row",
-            lambda tmp, cmd=cmd: (
-                (p := drive_csv(tmp)).write_bytes(p.read_bytes()[:-25]),
-                _base(cmd, [p], tmp),
-            )[1],
-            r"cells but the header has 4 columns; complete or remove that line \(a truncated",
-        ),
-        refused(
-            f"{cmd}-header-only",
-            entry,
-            "a CSV with a header and no rows",
-            lambda tmp, cmd=cmd: (
-                (tmp / "h.csv").write_text("t,q,u\n"),
-                _base(cmd, [tmp / "h.csv"], tmp),
-            )[1],
-            r"has a header but no data rows; add one row per sample",
-        ),
-        refused(
-            f"{cmd}-text-cell",
-            entry,
-            "a CSV with a text cell ('n/a') among the numbers",
-            lambda tmp, cmd=cmd: (
-                (p := drive_csv(tmp)).write_text(p.read_text().replace("\n0.01", "\nn/a", 1)),
-                _base(cmd, [p], tmp),
-            )[1],
-            r"cell 'n/a' is not a number; every cell below the header must be numeric",
-        ),
-        refused(
-            f"{cmd}-no-time-column",
-            entry,
-            "a CSV without a time column",
-            lambda tmp, cmd=cmd: _base(
-                cmd,
-                [write_csv(tmp / "x.csv", {k: v for k, v in _drive_columns().items() if k != "t"})],
-                tmp,
-            ),
-            r"has no time column 't'.*Name the time column 't'",
-        ),
-        refused(
-            f"{cmd}-duplicate-column",
-            entry,
-            "a CSV whose header names a column twice",
-            lambda tmp, cmd=cmd: _base(cmd, [drive_csv(tmp, header="t,q,u,q")], tmp),
-            r"column name 'q' appears twice",
-        ),
-        refused(
-            f"{cmd}-unsupported-suffix",
-            entry,
-            "a .txt file",
-            lambda tmp, cmd=cmd: (
-                (tmp / "d.txt").write_text("t q u\n"),
-                _base(cmd, [tmp / "d.txt"], tmp),
-            )[1],
-            r"Unsupported file type '\.txt'.*supported suffixes",
-        ),
-    ]
+    for row_id, text, data, extra, match in _PER_COMMAND:
+        CASES.append(
+            refused(f"{cmd}-{row_id}", f"jaxvs {cmd}", text, _per_command(cmd, data, extra), match)
+        )
 
 # --- sub-command options ------------------------------------------------------------------------
 
