@@ -503,13 +503,17 @@ def main(argv: list[str] | None = None) -> int:
         _interrupt.stage("checking the options and files")
         if args.command != "check":
             _compilation_cache()
-        return _COMMANDS[args.command](args)
+        code = _COMMANDS[args.command](args)
+        _interrupt.done()
+        return code
     except KeyboardInterrupt:
         return _interrupt.finish(EXIT_INTERRUPTED, _interrupt.line())
     except Exception:
         if _interrupt.was_interrupted():  # the interrupt, wrapped by XLA on its way out
             return _interrupt.finish(EXIT_INTERRUPTED, _interrupt.line())
-        return _error(debug)
+        code = _error(debug)
+        _interrupt.done()
+        return code
 
 
 def _error(debug: bool) -> int:

@@ -62,7 +62,6 @@ class _State:
         self.out: Path | None = None  # the report folder, once validated
         self.out_existed = False
         self.committed = False
-        self.written: list[str] = []  # what a command wrote outside a report folder
         self.staging: list[Path] = []  # removed on interrupt
         self.grace = GRACE_S
 
@@ -124,6 +123,8 @@ def _unraisable(unraisable) -> None:
 
 def _on_sigint(signum, frame) -> None:
     state = _state
+    if state.finished:  # the command has ended (its exit code stands) or is ending
+        return
     with state.echo_lock:
         echo = state.echo_handler > 0
         state.echo_handler -= echo
@@ -202,10 +203,6 @@ def report_folder(out: Path, existed: bool, staging: Path) -> None:
     _state.staging.append(staging)
 
 
-def wrote(path: str) -> None:
-    _state.written.append(path)
-
-
 def committed() -> None:
     _state.committed = True
 
@@ -238,12 +235,10 @@ def line(command: str | None = None, stage: str | None = None) -> str:
         cmd = sys.argv[1]  # interrupted while starting, before main() parsed the command
     during = stage or state.stage
     head = f"jaxvs {cmd}: interrupted while {during}" if cmd != "jaxvs" else "jaxvs: interrupted"
-    done = list(state.written)
     if state.committed and state.out is not None:
         return f"{head}; the complete report was written to {state.out}."
     if state.out is None:
-        nothing = "nothing was written" if not done else f"only {', '.join(done)} was written"
-        return f"{head}; {nothing}."
+        return f"{head}; nothing was written."
     if state.out_existed:
         return f"{head}; nothing was written: {state.out} still holds the earlier report."
     return f"{head}; nothing was written ({state.out} was not created)."
@@ -256,6 +251,11 @@ def _discard(state: _State) -> None:
         shutil.rmtree(path, ignore_errors=True)
         for leftover in path.parent.glob(f".{path.name}.*"):  # temporary folders of a save
             shutil.rmtree(leftover, ignore_errors=True)
+
+
+def done() -> None:
+    """The command has ended: a Ctrl-C from now on changes nothing (the exit code stands)."""
+    _state.finished = True
 
 
 def was_interrupted() -> bool:

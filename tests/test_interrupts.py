@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_bad_input_cli import _drive_columns, _thermal_columns, write_csv
+from test_bad_input_cli import _thermal_columns, write_csv
 
 pytestmark = pytest.mark.slow  # ~20 real processes, each importing JAX
 
@@ -108,9 +108,15 @@ def _out_absent_or_complete(cwd: Path, out: str = "o", files=("report.json", "re
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory) -> Path:
+    import jax.random as jr
+
+    from jaxvs.data import save_csv
+    from jaxvs.twins import DriveTwin
+
     d = tmp_path_factory.mktemp("interrupts")
-    write_csv(d / "cal.csv", _drive_columns(3000))
-    write_csv(d / "val.csv", _drive_columns(1500))
+    # a drive twin's records: identifiable, so `diagnose` runs for a minute, not seconds
+    save_csv(DriveTwin().experiment(jr.key(0), duration=6.0), d / "cal.csv")
+    save_csv(DriveTwin().experiment(jr.key(1), duration=3.0), d / "val.csv")
     t = np.arange(1500) * 1e-3  # one direction only: not identifiable, reported quickly
     write_csv(d / "ramp.csv", {"t": t, "q": 0.01 * t, "u": 30 + np.sin(40 * t), "r": 0.01 * t})
     write_csv(d / "th.csv", _thermal_columns(600))
