@@ -28,6 +28,11 @@ def as_real(x: Any, what: str) -> Array:
 
     **Raises:** `TypeError` for complex input: a parameter or signal of a machine model is
     real; take `.real` or `abs()` explicitly if that is what was meant."""
+    if not isinstance(x, jax.Array) and np.asarray(x).dtype.kind in "USOV":
+        raise TypeError(
+            f"{what} must be real numbers; got {np.asarray(x).dtype} values. Convert them "
+            "with np.asarray(..., dtype=float)."
+        )
     x = jnp.asarray(x)
     if jnp.iscomplexobj(x):
         raise TypeError(

@@ -24,7 +24,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float, Int, PyTree
 
-from .._misc import is_traced, timed_call
+from .._misc import concrete, is_traced, timed_call
 from ._covariance import delta_method, jacobian_covariance, t_quantile
 from ._parametrise import is_parameter, unwrap
 from ._residuals import AbstractResidual, Joint
@@ -255,8 +255,31 @@ def _real_ravel(tree: PyTree, dtype) -> Float[Array, " n"]:
 # ----------------------------------------------------------------------------- the solve
 
 
+def _check_weights(weights: Any) -> None:
+    """Refuse weights that make the cost meaningless: NaN/inf, negative, or all zero."""
+    values = [concrete(w) for w in jax.tree_util.tree_leaves(weights)]
+    known = [np.asarray(v, dtype=float) for v in values if v is not None]
+    if any(not np.isfinite(v).all() for v in known):
+        raise ValueError(
+            "calibrate: the weights contain NaN or inf; give finite weights (e.g. 1/σ_noise "
+            "of each experiment)."
+        )
+    if any((v < 0).any() for v in known):
+        raise ValueError(
+            "calibrate: weights must be >= 0 (they multiply the residual, e.g. 1/σ_noise); "
+            "got a negative weight."
+        )
+    if known and len(known) == len(values) and all((v == 0).all() for v in known):
+        raise ValueError(
+            "calibrate: the weights are all zero, so the cost is 0 for any parameter and "
+            "nothing can be calibrated; give positive weights (e.g. 1/σ_noise)."
+        )
+
+
 def _normalise(residual: Any, data: Any, weights: Any) -> tuple[AbstractResidual, Any]:
     """One residual for the whole problem: several experiments become a `Joint`."""
+    if weights is not None:
+        _check_weights(weights)
     if isinstance(residual, list | tuple):
         if not isinstance(data, list | tuple) or len(data) != len(residual):
             raise ValueError(

@@ -487,6 +487,12 @@ def fit_rational(
             "the response at -w is the complex conjugate of the one at w."
         )
     H = _check_finite(H, H_c, "H", "Drop those frequency points (or give them zero weight).")
+    if H_c is not None and not np.any(H_c):
+        raise ValueError(
+            "fit_rational: H is zero at every frequency, so there is nothing to fit (every "
+            "coefficient would be 0). Check the measurement channel and its scaling, or "
+            "the array passed as H."
+        )
 
     if weights is None:
         w2 = jnp.ones((n_freq,), jnp.float64)
@@ -507,6 +513,11 @@ def fit_rational(
         w = _check_finite(w, w_c, "weights", "Use 0 to drop a point.")
         if w_c is not None and np.any(w_c < 0):
             raise ValueError("fit_rational: weights must be non-negative (0 drops a point).")
+        if w_c is not None and not np.any(w_c):
+            raise ValueError(
+                "fit_rational: the weights are all zero, so every point is dropped; give "
+                "positive weights where the data count (e.g. 1/|H| or the coherence)."
+            )
         w2 = jnp.asarray(w, jnp.float64) ** 2
         if w2.ndim > 1:
             w2 = jnp.broadcast_to(w2, H.shape).reshape(size, n_freq)

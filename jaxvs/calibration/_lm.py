@@ -327,7 +327,18 @@ def lm_step(
         # A rejected step already inside the tolerance: no move that small lowers the
         # cost, so θ is stationary to rounding (a noisy, ill-conditioned optimum, where
         # the Newton step itself is rounding noise).
-        stalled = ~accept & jnp.all(jnp.abs(delta) <= atol + rtol * jnp.abs(s.theta))
+        # Not when the Gauss-Newton model still promises a real reduction: then the steps
+        # failed because the residual turns NaN/inf just ahead (a wall on the path to the
+        # optimum), and stopping would return a stale θ as a success. The damping keeps
+        # growing instead and the fit ends as `nonfinite`. (heuristic: sqrt(rtol) of the
+        # cost separates rounding noise at an optimum from a wall.)
+        promised = -(jnp.dot(jtr, step) + 0.5 * jnp.dot(step, jtj @ step))
+        stalled = (
+            ~accept
+            & finite
+            & (promised <= jnp.sqrt(rtol) * cost)
+            & jnp.all(jnp.abs(delta) <= atol + rtol * jnp.abs(s.theta))
+        )
         converged = at_boundary | newton | stalled
     else:
         converged = at_boundary | _newton_converged(theta, cost, jtj, jtr, rtol)[0]

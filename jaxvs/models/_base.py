@@ -13,6 +13,7 @@ map over `batch_shape` with `jax.vmap`, so a family of 4096 systems is one call.
 """
 
 import abc
+import dataclasses
 import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -22,8 +23,28 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
+from .._misc import check_finite, concrete
+
 if TYPE_CHECKING:
     from .lti import ModalRealisation, StateSpace
+
+
+PARAMETER_FIX = (
+    "Every parameter must be a finite number (a NaN usually comes from a failed fit or a "
+    "division by zero upstream)."
+)
+
+
+def check_parameters(module: eqx.Module) -> None:
+    """Refuse NaN/inf in the concrete array fields of a model or model part (DESIGN.md §6):
+    a `ValueError` naming the class, the field and the first bad index. Traced fields
+    (a model built inside `jit`/`vmap`) are left to the run-time checks of `simulate`."""
+    for field in dataclasses.fields(module):
+        if field.metadata.get("static", False):
+            continue
+        value = getattr(module, field.name, None)
+        if eqx.is_inexact_array(value) and concrete(value) is not None:
+            check_finite(value, f"{type(module).__name__}: {field.name}", PARAMETER_FIX)
 
 
 class AbstractModel(eqx.Module):
@@ -31,7 +52,11 @@ class AbstractModel(eqx.Module):
 
     Every jaxvs model implements `predict`; `jaxvs.calibration.SimulationError` calibrates
     any of them, `jax.vmap` over the parameters makes a family, `jax.jit` compiles it.
+    Concrete NaN/inf parameters are refused when the model is built.
     """
+
+    def __check_init__(self):
+        check_parameters(self)
 
     @abc.abstractmethod
     def predict(

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._misc import check_finite, concrete
 from ._base import AbstractLinearModel, map_batch
 from ._discretise import (
     METHODS,
@@ -192,6 +193,10 @@ def _block_states(mps: tuple[Array, ...], mtop: Array, z: Array, s0: Array) -> t
 
 
 _MSG_NAN = "simulate: u contains NaN or inf; clean or interpolate the input signal first."
+_MSG_MODEL = (
+    "simulate: the model's parameters are NaN or inf; give finite parameters (a NaN usually "
+    "comes from a failed fit or a division by zero upstream)."
+)
 _MSG_OVERFLOW = (
     "simulate: the response is not finite (overflow). The model is unstable, or the "
     "Euler/Heun step is unstable for this dt (dt·|λ| too large): use method='zoh' or "
@@ -420,6 +425,10 @@ def simulate(
     cdt = _float_dtype(u, who)
     u = u.astype(cdt)
     m = model.n_inputs
+    if m == 1 and u.ndim >= 2 and u.shape[-1] == 1:
+        # A column (time, 1) is time x inputs, as for multi-input models -- never a batch of
+        # one-sample experiments.
+        u = u[..., 0]
     core = 1 if m == 1 else 2
     if u.ndim < core:
         expected = "(*batch, time)" if m == 1 else f"(*batch, time, {m})"
@@ -450,11 +459,18 @@ def simulate(
         x0 = jnp.asarray(x0)
         if jnp.iscomplexobj(x0):
             raise TypeError(f"{who}: x0 must be real.")
+        x0 = check_finite(x0, f"{who}: x0", "Give a finite initial state (default: zeros).")
         if x0.shape not in ((n,), batch + (n,)):
             raise ValueError(
                 f"{who}: x0 has shape {x0.shape}; expected ({n},) or {batch + (n,)} (the "
                 f"model has {n} states in the coordinates of model.to_state_space())."
             )
+    params = [concrete(x) for x in jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_array))]
+    if any(p is not None and not np.isfinite(p).all() for p in params):
+        raise ValueError(
+            f"{who}: the model ({type(model).__name__}) has NaN or inf parameters; give finite "
+            "parameters (a NaN usually comes from a failed fit or a division by zero upstream)."
+        )
     dt_arr = _check_dt(dt, who)
     u_flat = u.reshape((-1,) + u.shape[-core:]) if u_batch else u
     # The engine parameters are part of the jit cache key (they are module-level
@@ -467,6 +483,12 @@ def simulate(
 @eqx.filter_jit
 def _simulate_flat(model, u, dt, x0, method, batch, u_lanes, config):
     """Discretise, build tables and run the engine on flattened lanes (jitted)."""
+    # NaN/inf parameters are named as such (not reported as an unstable model), and caught
+    # where they reach only the output (a NaN residue leaves the states finite).
+    params = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
+    if params:
+        bad = ~jnp.all(jnp.stack([jnp.all(jnp.isfinite(p)) for p in params]))
+        u = eqx.error_if(u, bad, _MSG_MODEL)
     cdt = u.dtype
     n_lanes = math.prod(batch)
     m_batch = tuple(model.batch_shape)

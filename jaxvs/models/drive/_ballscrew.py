@@ -24,6 +24,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ..._misc import as_real
+from .._base import check_parameters
 from ..lti import NormalModes, normal_modes
 from ._friction import AbstractFriction, NoFriction, dead_zone
 
@@ -44,6 +45,10 @@ def _friction(f, where: str) -> AbstractFriction:
 
 class AbstractMechanics(eqx.Module):
     """Mechanical part of a drive: masses, springs, friction, in linear coordinates [m]."""
+
+    def __check_init__(self):
+        check_parameters(self)
+
 
     @property
     @abc.abstractmethod
@@ -229,6 +234,10 @@ class BallScrew(eqx.Module):
     - `density`: [kg/m³] (steel, 7850). `youngs_modulus` [Pa] (2.1e11), `shear_modulus`
       [Pa] (8.1e10).
     """
+
+    def __check_init__(self):
+        check_parameters(self)
+
 
     length: Float[Array, ""]
     diameter: Float[Array, ""]

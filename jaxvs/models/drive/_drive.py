@@ -37,7 +37,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ..._misc import as_real, is_traced
-from .._base import AbstractModel
+from .._base import AbstractModel, check_parameters
 from .._nonlinear_simulate import (
     check_step,
     finite_or_error,
@@ -89,6 +89,10 @@ class PositionLoop(eqx.Module):
       bandwidth is about `kp` rad/s for a fast velocity loop.
     """
 
+    def __check_init__(self):
+        check_parameters(self)
+
+
     kp: Float[Array, ""]
 
     def __init__(self, kp: ArrayLike):
@@ -108,6 +112,10 @@ class VelocityLoop(eqx.Module):
     - `limit`: symmetric saturation of the output (static; `inf` for none), in the command
       unit (the EMPS amplifier saturates at 10 V).
     """
+
+    def __check_init__(self):
+        check_parameters(self)
+
 
     kv: Float[Array, ""]
     ki: Float[Array, ""]
@@ -130,6 +138,10 @@ class VelocityLoop(eqx.Module):
 class AbstractActuator(eqx.Module):
     """Turns the velocity controller's command into the drive force [N] on the motor side
     (linear coordinates), possibly with its own states (current, force lag)."""
+
+    def __check_init__(self):
+        check_parameters(self)
+
 
     @property
     @abc.abstractmethod

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ..._misc import as_real
+from .._base import check_parameters
 
 __all__ = [
     "AbstractFriction",
@@ -85,6 +86,10 @@ def smooth_sign(velocity: ArrayLike, velocity_scale: float) -> Array:
 class AbstractFriction(eqx.Module):
     """A friction law: `friction(v)` is the force [N] that opposes the velocity `v` [m/s]
     (same sign as `v`, to be subtracted in `m a = f − friction(v)`)."""
+
+    def __check_init__(self):
+        check_parameters(self)
+
 
     @abc.abstractmethod
     def __call__(self, velocity: Float[ArrayLike, "..."]) -> Float[Array, "..."]:

@@ -22,7 +22,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from ..._misc import as_real
-from .._base import check_batch, map_batch
+from .._base import check_batch, check_parameters, map_batch
 from ._modal import ModalModel
 from ._rational import RationalTF
 from ._statespace import StateSpace
@@ -159,6 +159,10 @@ class OscillatorChain(eqx.Module):
     them. Non-positive masses or stiffnesses and negative dampings raise at run time
     (`eqx.error_if`), also under `jit`.
     """
+
+    def __check_init__(self):
+        check_parameters(self)
+
 
     masses: Float[Array, "*batch n"]
     stiffnesses: Float[Array, "*batch spring"]

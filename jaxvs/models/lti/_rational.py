@@ -46,6 +46,11 @@ class RationalTF(AbstractLinearModel):
                 "RationalTF: num and den are coefficient vectors (highest power first); "
                 f"got shapes {num.shape} and {den.shape}."
             )
+        if num.shape[-1] == 0:
+            raise ValueError(
+                "RationalTF: num is empty; give at least one coefficient (e.g. [1.0]; [0.0] "
+                "for a zero response)."
+            )
         if den.shape[-1] < 2:
             raise ValueError(
                 "RationalTF: the denominator must have order >= 1 (at least two "
