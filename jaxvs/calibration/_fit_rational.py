@@ -564,7 +564,12 @@ def fit_rational(
     )
     if throw:
         num = _raise_if_failed(report.result, num)
-    model = RationalTF(num.reshape(batch + (nb + 1,)), den.reshape(batch + (na + 1,)))
+    num, den = num.reshape(batch + (nb + 1,)), den.reshape(batch + (na + 1,))
+    # A failed member (throw=False) keeps its last, possibly non-finite iterate for
+    # inspection: set past the constructor, which refuses NaN parameters.
+    model = eqx.tree_at(
+        lambda m: (m.num, m.den), RationalTF(jnp.ones_like(num), jnp.ones_like(den)), (num, den)
+    )
     report = jax.tree_util.tree_map(
         lambda x: x if x.ndim == 0 else x.reshape(batch + x.shape[1:]), report
     )
