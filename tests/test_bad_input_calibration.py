@@ -24,7 +24,7 @@ from jaxvs.calibration import (
     calibrate,
     fit_rational,
 )
-from jaxvs.data import FRFData, Record
+from jaxvs.data import Record
 from jaxvs.models import RationalTF, frequency_response
 
 NAN = float("nan")
@@ -222,15 +222,14 @@ CASES: list[Case] = [
             {"x": _X[:1]},
             EquationError(lambda m, d: m[0].a * d["x"] - m[1].a),
         ),
-        match=r"(fewer|1 residual).*(2 free|parameters)",
+        match=r"1 residuals for 2 free parameters.*needs more data points than free parameters",
     ),
     _c(
         "solver-name",
         "calibrate",
         "solver='newton-raphson'",
         lambda: _calibrate(_line, solver="newton-raphson"),
-        exc=(ValueError, TypeError),
-        match=r"solver",
+        match=r"unknown solver 'newton-raphson'; use one of",
     ),
     _c(
         "constant-input",
@@ -289,19 +288,19 @@ CASES += [
         "nan-data",
         "H with a NaN",
         lambda: fit_rational(2 * jnp.pi * _F, _H.at[4].set(NAN), (0, 2)),
-        match=r"(NaN|non-finite)",
+        match=r"H (contains NaN or inf|has 1 non-finite).*Drop those frequency points",
     ),
     _fr(
         "order-negative",
         "order (0, -1)",
         lambda: fit_rational(2 * jnp.pi * _F, _H, (0, -1)),
-        match=r"order",
+        match=r"order \(nb, na\) = \(0, -1\) needs na >= 1 and nb >= 0",
     ),
     _fr(
         "too-few-points",
         "3 frequencies for order (2, 4)",
         lambda: fit_rational(2 * jnp.pi * _F[:3], _H[:3], (2, 4)),
-        match=r"(frequenc|points)",
+        match=r"3 frequency points cannot determine 7 parameters.*Give at least 7 points",
     ),
     _fr(
         "weights-zero",
@@ -313,7 +312,7 @@ CASES += [
         "shapes",
         "omega (40,) and H (39,)",
         lambda: fit_rational(2 * jnp.pi * _F, _H[:-1], (0, 2)),
-        match=r"(shape|match)",
+        match=r"H of shape \(39,\) does not match omega of shape \(40,\)",
     ),
     _fr(
         "exact",
