@@ -151,6 +151,10 @@ def page(rows: list[dict], bad: dict[str, str]) -> str:
         f"| crashes | {n['crashes']} | {percent(n['crashes'], n['total'])} |",
         f"| **total** | **{n['total']}** | |",
         "",
+        f"Of the {n['total'] - n['handled']} inputs that must be refused, {n['refused']} "
+        f"({percent(n['refused'], n['total'] - n['handled'])}) are refused with a message that "
+        "names the problem and the fix (each row pins both with a regular expression).",
+        "",
         "Loaders are also fuzzed (`tests/test_fuzz_loaders.py`, hypothesis): random bytes,",
         "truncations, overwritten bytes and cell edits of valid CSV, NPZ, MAT, HDF5 and UFF",
         "files either load exactly what the file holds or raise a `ValueError` naming the file.",
@@ -188,8 +192,9 @@ def readme_paragraph(rows: list[dict], bad: dict[str, str]) -> str:
         f"{START}\n"
         f"**Bad input.** Of {n['total']} bad or borderline inputs in the bad-input matrix "
         f"(`tests/test_bad_input_*.py`, run in CI), {n['refused']} "
-        f"({percent(n['refused'], n['total'])}) are refused with a message naming the problem "
-        f"and the fix, {n['handled']} are handled correctly, {n['silently_wrong']} give a "
+        f"({percent(n['refused'], n['total'] - n['handled'])} of those that must be refused) are "
+        f"refused with a message naming the problem and the fix, {n['handled']} borderline "
+        f"but legal inputs are handled correctly, {n['silently_wrong']} give a "
         f"silently wrong answer and {n['crashes']} crash. The loaders are also fuzzed "
         "(hypothesis: random bytes, truncations, cell edits). Every case and its message: "
         "[What jaxvs refuses](docs/guides/refusals.md).\n"
