@@ -99,7 +99,10 @@ def true_structure(rec: dict, role: np.ndarray, dt: float) -> dict:
 def recovery_and_speed(quick: bool) -> dict:
     hours, dt = (12.0, 60.0) if quick else (24.0, 60.0)
     rec = spindle_records(hours, dt)
-    kw = dict(hidden=(3, 6) if quick else (3, 6, 10, 15), inits=2 if quick else 3)
+    # hidden sizes 3 and 6 (not the study's 15): 330 candidate designs, enough for the
+    # >= 256 target; the larger networks are covered by the Table 4 section, and with the
+    # loop reference they would not finish in the benchmark's time on 2 shared cores.
+    kw = dict(hidden=(3, 6), inits=2 if quick else 3)
     t0 = time.perf_counter()
     load0 = os.getloadavg()
     rep = jaxvs.design(rec, target="T_bearing", progress=False, **kw)
@@ -465,7 +468,7 @@ def main():
         "--merge", action="store_true", help="only merge the saved sections into json + md"
     )
     args = p.parse_args()
-    from jaxvs.studies.design._report import _clean
+    from jaxvs._misc import json_safe
 
     suffix = "_quick" if args.quick else ""
     out = ROOT / "results"
@@ -482,7 +485,7 @@ def main():
         for name in args.sections.split(","):
             t0 = time.perf_counter()
             result = runs[name]()
-            (parts / f"{name}.json").write_text(json.dumps(_clean(result), indent=2) + "\n")
+            (parts / f"{name}.json").write_text(json.dumps(json_safe(result), indent=2) + "\n")
             print(
                 f"{name}: {time.perf_counter() - t0:.0f} s, load {os.getloadavg()[0]:.1f}",
                 flush=True,

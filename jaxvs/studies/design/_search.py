@@ -318,9 +318,9 @@ def _train_impl(
             state0,
             pm,
             block=block,
-            first_steps=max_steps,
-            tail_block=max(1, block // 2),
-            block_steps=10,
+            first_steps=first,
+            tail_block=tail,
+            block_steps=bs,
         )
     return final.best_theta, final.best_val, final.lm.num_steps
 
