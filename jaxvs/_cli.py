@@ -33,7 +33,8 @@ def _parser() -> argparse.ArgumentParser:
         description=(
             "Recalibrate the family's nominal model on the DATA experiments, map where it "
             "still disagrees with the measurements, name the unmodelled effect(s) that close "
-            "the gap on held-out data, and write report.json, report.md and figures to --out. "
+            "the gap on held-out data, and write report.json, report.md, report.html and figures "
+            "to --out. "
             "DATA: CSV (header row, time column t [s]), NPZ, MAT or HDF5 files with the "
             "canonical signal names of the family, or the EMPS .mat files as they are."
         ),
@@ -73,7 +74,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     chk.add_argument("data", nargs="+", help="experiment file(s)")
     chk.add_argument("--family", required=True, choices=["drive", "tmf", "thermal"])
-    chk.add_argument("--out", default=None, help="folder for report.json and report.md")
+    chk.add_argument(
+        "--out", default=None, help="folder for report.json, report.md and report.html"
+    )
     chk.add_argument(
         "--option", action="append", default=[], metavar="KEY=VALUE", help="family option"
     )
@@ -185,7 +188,7 @@ def _diagnose(args) -> int:
     if report.content.get("not_identifiable"):
         report.save(out)
         print(f"jaxvs: not identifiable: {report.content['not_identifiable']}", file=sys.stderr)
-        print(f"written: {out / 'report.json'}, {out / 'report.md'}")
+        print(f"written: {out / 'report.json'}, {out / 'report.md'}, {out / 'report.html'}")
         return 3
     if not args.no_figures:
         from .plotting import plot_diagnosis
@@ -193,7 +196,7 @@ def _diagnose(args) -> int:
         report.content["figures"] = plot_diagnosis(report, out)
     report.save(out)
     print(report.to_markdown())
-    print(f"written: {out / 'report.json'}, {out / 'report.md'}")
+    print(f"written: {out / 'report.json'}, {out / 'report.md'}, {out / 'report.html'}")
     return 0
 
 

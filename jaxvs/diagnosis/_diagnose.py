@@ -86,10 +86,12 @@ def _check_sampling(recs: list[tuple[Record, str]]) -> None:
             )
 
 
-def _not_identifiable_report(fam, why, cal_recs, val_recs, how, t_start, res=None):
+def _not_identifiable_report(fam, why, cal_recs, val_recs, how, t_start, res=None, check=None):
     """The report of a record that cannot identify the nominal model: no verdict."""
     names = ", ".join(n for _, n in cal_recs)
     content = {
+        "check": check,
+        "warnings": (check or {}).get("warnings", []),
         "family": fam.name,
         "gap": None,
         "where": [],
@@ -194,6 +196,16 @@ def diagnose(
     val_recs = _records(validation, "validation")
     _check_signals(fam, cal_recs + val_recs)
     _check_sampling(cal_recs + val_recs)
+    # `jaxvs check` first (DESIGN.md §3.5): blocking findings end the run without a
+    # verdict, the others travel with the report as warnings
+    from ._check import check_records
+
+    say("checking the calibration data (jaxvs check)")
+    checked = check_records(fam, cal_recs).content
+    if checked["blocking"]:
+        why = "jaxvs check: " + " ".join(checked["blocking"])
+        how = "not split (the check refused the calibration data)"
+        return _not_identifiable_report(fam, why, cal_recs, val_recs, how, t_start, None, checked)
     if not val_recs:
         if len(cal_recs) >= 2:
             k = max(1, int(round(holdout * len(cal_recs))))
@@ -215,7 +227,9 @@ def diagnose(
         cal = [fam.prepare(r, n) for r, n in cal_recs]
         val = [fam.prepare(r, n) for r, n in val_recs]
     except NotIdentifiable as err:
-        return _not_identifiable_report(fam, str(err), cal_recs, val_recs, how, t_start)
+        return _not_identifiable_report(
+            fam, str(err), cal_recs, val_recs, how, t_start, None, checked
+        )
 
     res = search(
         fam,
@@ -231,7 +245,7 @@ def diagnose(
     )
     if res.not_identifiable is not None:
         return _not_identifiable_report(
-            fam, res.not_identifiable, cal_recs, val_recs, how, t_start, res
+            fam, res.not_identifiable, cal_recs, val_recs, how, t_start, res, checked
         )
     say("mapping the gap")
     exps = res.calibration + res.validation
@@ -330,6 +344,8 @@ def diagnose(
             "target": fam.target_label,
         },
         "not_identifiable": None,
+        "check": checked,
+        "warnings": list(checked["warnings"]),
         "where": where,
         "where_after": where_after,
         "candidates": cand_json,
