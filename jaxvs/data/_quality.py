@@ -16,6 +16,7 @@ __all__ = ["signal_quality"]
 _CLIP_SHARE = 0.01
 _CLIP_RUN = 3
 _QUANT_SHARE = 0.05
+_HELD_SHARE = 0.9
 
 
 def _clipped_share(x: np.ndarray) -> float:
@@ -46,6 +47,16 @@ def _quantisation_step(x: np.ndarray) -> float:
     if levels.size < 2:
         return 0.0
     return float(np.min(np.diff(levels)))
+
+
+def _held_share(x: np.ndarray) -> float:
+    """Share of the samples strictly between the signal's extremes that repeat their
+    predecessor (1 for a two-level signal). A clipped signal varies between its
+    plateaus (small share); a held set-point does not (share near 1)."""
+    inner = (x[1:] > x.min()) & (x[1:] < x.max())
+    if inner.sum() < 10:
+        return 1.0
+    return float(np.mean(x[1:][inner] == x[:-1][inner]))
 
 
 def signal_quality(
@@ -82,15 +93,23 @@ def signal_quality(
         clipped = _clipped_share(x)
         step = _quantisation_step(x)
         ratio = step / std if std > 0 else math.inf
+        held = _held_share(x)
         summary[sig] = {
             "clipped_share": clipped,
             "quantisation_step": step,
             "quantisation_step_over_std": ratio,
+            "held_share": held,
         }
         if std == 0:
             (blocking if sig in required else warnings).append(
                 f"{name}: signal {sig!r} is constant; it carries no information."
             )
+            continue
+        if held > _HELD_SHARE:
+            # heuristic: a set-point held between steps (a speed profile of operating
+            # points, a bang-bang input) repeats its previous sample almost always, also
+            # between its extremes; its few levels and its plateaus at the extremes are
+            # the design of the experiment, not clipping or a coarse sensor
             continue
         if clipped > _CLIP_SHARE:
             warnings.append(
