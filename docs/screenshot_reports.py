@@ -4,7 +4,7 @@ into the docs (`docs/img/report_{diagnose,design,check}.png`).
 Run with `make screenshots` (it installs Chromium from the system packages when it is
 missing) or directly:
 
-    python docs/screenshot_reports.py [--keep DIR]
+    python docs/screenshot_reports.py [--keep DIR [--reuse]]
 
 It writes the three reports with the `jaxvs` command on small twin records (a thermal
 diagnosis with a hidden heat capacity, a thermal virtual-sensor design, a check of a
@@ -25,6 +25,8 @@ import tempfile
 
 HERE = pathlib.Path(__file__).resolve().parent
 IMG = HERE / "img"
+# window heights [px]: the diagnosis down to its collapsed search rounds and first figure
+HEIGHTS = {"diagnose": 2900, "design": 1500, "check": 650}
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "chrome")
 
 
@@ -111,16 +113,27 @@ def screenshot(browser: str, page: pathlib.Path, png: pathlib.Path, height: int)
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--keep", default=None, help="keep the report folders here")
+    parser.add_argument(
+        "--reuse", action="store_true", help="screenshot the reports already in --keep"
+    )
     args = parser.parse_args()
+    if args.reuse and not args.keep:
+        parser.error("--reuse needs --keep DIR (where the reports are)")
     browser = find_browser()
     version = subprocess.run([browser, "--version"], capture_output=True, text=True).stdout
     print(f"screenshot_reports: {version.strip() or browser}")
     root = pathlib.Path(args.keep or tempfile.mkdtemp(prefix="jaxvs-reports-"))
     root.mkdir(parents=True, exist_ok=True)
-    pages = write_reports(root)
+    if args.reuse:
+        pages = {n: root / n / "report.html" for n in HEIGHTS}
+        missing = [str(p) for p in pages.values() if not p.is_file()]
+        if missing:
+            sys.exit(f"screenshot_reports: --reuse: no {', '.join(missing)}")
+    else:
+        pages = write_reports(root)
     IMG.mkdir(exist_ok=True)
     for name, page in pages.items():
-        screenshot(browser, page, IMG / f"report_{name}.png", 1500 if name != "check" else 1000)
+        screenshot(browser, page, IMG / f"report_{name}.png", HEIGHTS[name])
     if args.keep is None:
         shutil.rmtree(root, ignore_errors=True)
 

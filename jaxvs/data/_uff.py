@@ -250,6 +250,17 @@ def _si_scale(d: dict, axis: str, meta: dict, name: str, path: Path) -> tuple[fl
     return _SPEC_SCALE[spec](length, force), unit, f"{unit} in UFF 164 unit system {code}"
 
 
+def _check_abscissa(path: Path, picked, meta: dict, allowed, axis: str, unit_si: str) -> None:
+    """Refuse an abscissa in another unit than jaxvs's (s for time, Hz for frequency)."""
+    for i, s in picked:
+        unit = _unit(s, "abscissa", meta)
+        if unit and unit.lower() not in allowed:
+            raise ValueError(
+                f"{path}: dataset {i} has its {axis} axis in {unit!r}; jaxvs uses {unit_si}. "
+                f"Re-export the file with the abscissa in {unit_si}."
+            )
+
+
 def _select(sets: list[dict], index: Sequence[int] | None, path: Path) -> list[tuple[int, dict]]:
     numbered = list(enumerate(sets))
     if index is None:
@@ -328,13 +339,7 @@ def load_uff_record(
     path, sets = _read(path)
     meta = _metadata(path, sets)
     picked = _functions(path, sets, index, skip_unsupported, (_FUNC_TIME,), "time response")
-    for i, s in picked:
-        unit = _unit(s, "abscissa", meta)
-        if unit and unit.lower() not in _TIME_UNITS:
-            raise ValueError(
-                f"{path}: dataset {i} has its time axis in {unit!r}; jaxvs records are in "
-                "seconds. Re-export the file with the abscissa in s."
-            )
+    _check_abscissa(path, picked, meta, _TIME_UNITS, "time", "s")
     t = _same_grid(path, picked, "time")
     ids = [_label(s.get("id1")) for _, s in picked]
     if all(ids) and len(set(ids)) == len(ids):
@@ -424,13 +429,7 @@ def load_uff_frf(
     cohs = [(i, s) for i, s in picked if int(s["func_type"]) == _FUNC_COHERENCE]
     if not frfs:
         raise ValueError(f"{path}: only coherences, no FRF (function type 4 or 5) in the file.")
-    for i, s in frfs:
-        unit = _unit(s, "abscissa", meta)
-        if unit and unit.lower() not in _FREQ_UNITS:
-            raise ValueError(
-                f"{path}: dataset {i} has its frequency axis in {unit!r}; jaxvs FRFs are in "
-                "Hz. Re-export the file with the abscissa in Hz."
-            )
+    _check_abscissa(path, frfs, meta, _FREQ_UNITS, "frequency", "Hz")
     f = _same_grid(path, picked, "frequency")
     described, factors, original = [], [], {}
     for i, s in frfs:
