@@ -14,10 +14,28 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-__all__ = ["expm", "is_traced", "json_safe", "timed_call"]
+__all__ = ["as_real", "expm", "is_traced", "json_safe", "timed_call"]
 
 _CACHE: collections.OrderedDict = collections.OrderedDict()
 _CACHE_SIZE = 32
+
+
+def as_real(x: Any, what: str) -> Array:
+    """`x` as a real floating JAX array (integers promoted to the default float).
+
+    **Arguments:** `x`, anything `jnp.asarray` takes; `what`, how the error names it
+    (e.g. ``"ModalModel: omega"``).
+
+    **Raises:** `TypeError` for complex input: a parameter or signal of a machine model is
+    real; take `.real` or `abs()` explicitly if that is what was meant."""
+    x = jnp.asarray(x)
+    if jnp.iscomplexobj(x):
+        raise TypeError(
+            f"{what} must be real; got a complex array (take .real or abs() explicitly)."
+        )
+    if not jnp.issubdtype(x.dtype, jnp.floating):
+        x = x.astype(jnp.result_type(float))
+    return x
 
 
 def is_traced(tree: Any) -> bool:

@@ -220,6 +220,19 @@ def test_family_errors():
         calibrate_family(guess, {"t": T, "y": np.ones((3, 40))}, CURVE)
 
 
+def test_shared_options_are_checked_by_every_entry_point():
+    # multistart / calibrate_family take calibrate's options as **options: a misspelt
+    # option or a bad value is refused before any work, as calibrate refuses it.
+    guess = FirstOrder(jnp.full(3, 15.0), jnp.full(3, 1.0), jnp.full(3, 1.0))
+    data = [{"t": T, "y": Y}] * 3
+    with pytest.raises(TypeError, match="unknown option.*max_step.*the options are max_steps"):
+        calibrate_family(guess, data, CURVE, max_step=10)
+    with pytest.raises(ValueError, match="calibrate_family: max_steps must be a positive int"):
+        calibrate_family(guess, data, CURVE, max_steps=0)
+    with pytest.raises(ValueError, match="multistart: confidence must lie in"):
+        jaxvs.calibration.multistart(guess, {"t": T, "y": Y}, CURVE, confidence=1.5)
+
+
 # ----------------------------------------------------------------------------- parametrisations
 
 

@@ -24,6 +24,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
+from .._misc import as_real
+
 __all__ = [
     "AbstractParameter",
     "Bounded",
@@ -100,15 +102,6 @@ def _concrete(x: Any) -> np.ndarray | None:
         return np.asarray(x)
     except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
         return None
-
-
-def _as_inexact(x: ArrayLike, what: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(f"{what}: the value must be real; got a complex array.")
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
-    return x
 
 
 class Fixed(AbstractParameter):
@@ -189,7 +182,7 @@ def positive(x: ArrayLike, *, transform: Literal["log", "softplus"] = "log") -> 
     **Raises:** `ValueError` if a concrete `x` has entries <= 0 (under `jit`: an
     `eqx.error_if` runtime error).
     """
-    x = _as_inexact(x, "positive")
+    x = as_real(x, "positive")
     if transform not in ("log", "softplus"):
         raise ValueError(f"positive: transform must be 'log' or 'softplus'; got {transform!r}.")
     msg = (
@@ -220,7 +213,7 @@ def bounded(x: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> Bounded:
     **Raises:** `ValueError` if a concrete `x` is not strictly inside the bounds or
     `lo >= hi`.
     """
-    x = _as_inexact(x, "bounded")
+    x = as_real(x, "bounded")
     lo = jnp.broadcast_to(jnp.asarray(lo, x.dtype), x.shape)
     hi = jnp.broadcast_to(jnp.asarray(hi, x.dtype), x.shape)
     xc, loc, hic = _concrete(x), _concrete(lo), _concrete(hi)
@@ -353,7 +346,7 @@ def stable_denominator(den: ArrayLike) -> StableDenominator:
             )
         omegas, zetas, reals = _sections_from_poles(poles)
         lw[idx], lz[idx], lp[idx], lead[idx] = np.log(omegas), np.log(zetas), np.log(reals), d[0]
-    dtype = _as_inexact(den, "stable_denominator").dtype
+    dtype = as_real(den, "stable_denominator").dtype
     return StableDenominator(*(jnp.asarray(a, dtype) for a in (lw, lz, lp, lead)))
 
 

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, PyTree
 
-from .._misc import expm
+from .._misc import as_real, expm
 from ..data import Record
 from ..models import AbstractLinearModel, AbstractModel, frequency_response, map_batch, simulate
 
@@ -118,12 +118,7 @@ def _lookup(data: Any, name: str, where: str) -> Any:
 
 
 def _as_float_array(x: Any, name: str, where: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(f"{where}: signal {name!r} must be real; got a complex array.")
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
-    return x
+    return as_real(x, f"{where}: signal {name!r}")
 
 
 def _signals(data: Any, names: str | tuple[str, ...], where: str) -> Array:
