@@ -238,6 +238,7 @@ def test_diagnose_runs_the_check_first(tmp_path):
     the check's reason in report.json, report.md and report.html."""
     rep = jaxvs.diagnose(drive_record(both_ways=False), family="drive")
     assert rep.content["verdict"] is None
+    assert rep.content["not_identifiable"].startswith("jaxvs check:")
     assert "one direction only" in rep.content["not_identifiable"]
     assert rep.content["check"]["blocking"]
     path = save_csv(drive_record(both_ways=False), tmp_path / "oneway.csv")
