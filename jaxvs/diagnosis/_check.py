@@ -155,7 +155,7 @@ def _excitation_band(x: np.ndarray, fs: float) -> tuple[float, float] | None:
 
 _INPUTS = {"drive": "u", "tmf": "x_e", "thermal": "T_chassis"}
 _OUTPUTS = {"drive": "q", "tmf": "x_t", "thermal": "T_bearing"}
-_COMMANDS = ("r",)
+_NOT_JUDGED = {"drive": ("r",), "tmf": ("y",), "thermal": ()}
 
 
 def _record_quality(record: Record, name: str, family: str) -> tuple[dict, list[str], list[str]]:
@@ -168,8 +168,11 @@ def _record_quality(record: Record, name: str, family: str) -> tuple[dict, list[
         "signals": {},
     }
     # clipping and quantisation are properties of sensors and amplifiers: a commanded
-    # reference (`r`, whose dwell at the end of a move is by design) is not judged
-    signals = fam.required + tuple(s for s in fam.optional if s in record and s not in _COMMANDS)
+    # reference (`r`, whose dwell at the end of a move is by design) and a per-record
+    # setting (the other axis' position `y` of a TMF record) are not judged
+    signals = fam.required + tuple(
+        s for s in fam.optional if s in record and s not in _NOT_JUDGED[family]
+    )
     summary["signals"], blocking, warnings = signal_quality(
         {s: record[s] for s in signals if s != "t"}, name=name, required=fam.required
     )
@@ -287,9 +290,13 @@ def check(data: Any, *, family: str, **options: Any) -> CheckReport:
     return check_records(fam, recs)
 
 
-def check_records(fam: Any, recs: Sequence[tuple[Record, str]]) -> CheckReport:
+def check_records(
+    fam: Any, recs: Sequence[tuple[Record, str]], *, raise_value_errors: bool = False
+) -> CheckReport:
     """`check` on records already read and given their names (`jaxvs.diagnose` calls it
-    before any calibration); `fam` is the family instance with its options."""
+    before any calibration); `fam` is the family instance with its options. With
+    `raise_value_errors`, a `ValueError` of the family's preprocessing (a bad option, a
+    user error) is raised instead of being reported as blocking."""
     family = fam.name
     blocking: list[str] = []
     warnings: list[str] = []
@@ -319,6 +326,8 @@ def check_records(fam: Any, recs: Sequence[tuple[Record, str]]) -> CheckReport:
     except NotIdentifiable as error:
         blocking.append(f"the nominal model is not identifiable: {error}")
     except ValueError as error:
+        if raise_value_errors:
+            raise
         blocking.append(f"the family's preprocessing refuses the records: {error}")
     else:
         ident = _jacobian_report(nominal, experiments)

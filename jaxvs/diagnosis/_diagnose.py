@@ -196,16 +196,6 @@ def diagnose(
     val_recs = _records(validation, "validation")
     _check_signals(fam, cal_recs + val_recs)
     _check_sampling(cal_recs + val_recs)
-    # `jaxvs check` first (DESIGN.md §3.5): blocking findings end the run without a
-    # verdict, the others travel with the report as warnings
-    from ._check import check_records
-
-    say("checking the calibration data (jaxvs check)")
-    checked = check_records(fam, cal_recs).content
-    if checked["blocking"]:
-        why = "jaxvs check: " + " ".join(checked["blocking"])
-        how = "not split (the check refused the calibration data)"
-        return _not_identifiable_report(fam, why, cal_recs, val_recs, how, t_start, None, checked)
     if not val_recs:
         if len(cal_recs) >= 2:
             k = max(1, int(round(holdout * len(cal_recs))))
@@ -222,6 +212,16 @@ def diagnose(
             how = f"last {holdout:.0%} of the record held out as a contiguous block"
     else:
         how = "validation experiments given"
+    # `jaxvs check` first (DESIGN.md §3.5), on exactly the calibration experiments (the
+    # search then reuses the compiled nominal fit): blocking findings end the run without
+    # a verdict, the others travel with the report as warnings
+    from ._check import check_records
+
+    say("checking the calibration data (jaxvs check)")
+    checked = check_records(fam, cal_recs, raise_value_errors=True).content
+    if checked["blocking"]:
+        why = "jaxvs check: " + " ".join(checked["blocking"])
+        return _not_identifiable_report(fam, why, cal_recs, val_recs, how, t_start, None, checked)
     say(f"preparing {len(cal_recs)} calibration and {len(val_recs)} validation experiment(s)")
     try:
         cal = [fam.prepare(r, n) for r, n in cal_recs]
