@@ -328,7 +328,8 @@ def _check(args) -> int:
         folder.commit()
     print(report.to_markdown())
     if folder is not None:
-        print(f"written: {folder.out / 'report.json'}, {folder.out / 'report.md'}")
+        names = ("report.json", "report.md", "report.html")
+        print("written: " + ", ".join(str(folder.out / n) for n in names))
     return report.exit_code
 
 
