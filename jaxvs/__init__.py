@@ -6,7 +6,10 @@ Enable float64 for calibration in your own program (library code never does it):
     jax.config.update("jax_enable_x64", True)
 """
 
+# `_interrupt` comes first: the `jaxvs` command handles Ctrl-C from its first instant, before
+# JAX is imported (importing it does nothing else, and nothing when jaxvs is a library).
 from . import (
+    _interrupt,  # noqa: F401
     calibration as calibration,
     data as data,
     diagnosis as diagnosis,
@@ -82,4 +85,3 @@ from .models import (
 )
 from .studies import fit_first_order as fit_first_order, idim_ls as idim_ls
 from .studies.design import DesignReport as DesignReport, design as design
-

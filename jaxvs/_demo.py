@@ -21,7 +21,16 @@ import jax.random as jr
 import numpy as np
 
 
-def run_demo(out: str = "demo-report", n_positions: int = 8, seed: int = 0) -> int:
+def run_demo(
+    out: str | Path = "demo-report", n_positions: int = 8, seed: int = 0
+) -> tuple[int, list[str], float]:
+    """Run the demo and write its report into the folder `out` (created; the `jaxvs demo`
+    command passes a staging folder that it renames into place at the end).
+
+    **Returns:**
+
+    The exit code, the files written (relative to `out`) and the run time [s].
+    """
     jax.config.update("jax_enable_x64", True)  # the CLI is a program, not library code
 
     import jaxvs
@@ -35,12 +44,12 @@ def run_demo(out: str = "demo-report", n_positions: int = 8, seed: int = 0) -> i
     twin = MachineStructureTwin()
     y = np.linspace(0.0, twin.y_max, n_positions)
     print(f"jaxvs {jaxvs.__version__} demo: TMF family of a machine-structure twin")
-    print(f"[1/5] simulating drive-side PRBS at {n_positions} Y positions ...", flush=True)
+    _step(f"[1/5] simulating drive-side PRBS at {n_positions} Y positions")
     data = twin.prbs_experiment(y, jr.key(seed))
     dt = float(data.t[1] - data.t[0])
     fs = 1.0 / dt
 
-    print("[2/5] estimating T_TE from the two accelerometers (H1, coherence) ...", flush=True)
+    _step("[2/5] estimating T_TE from the two accelerometers (H1, coherence)")
     est = transmissibility(data.a_tcp, data.a_encoder, fs, nperseg=1024)
     band = (est.frequency >= 5.0) & (est.frequency <= 400.0)
     f = np.asarray(est.frequency)[band]
@@ -48,7 +57,7 @@ def run_demo(out: str = "demo-report", n_positions: int = 8, seed: int = 0) -> i
     H = np.asarray(est.H)[:, band]
     coh = np.asarray(est.coherence)[:, band]
 
-    print("[3/5] calibrating one rational TMF per position in one vectorised call ...", flush=True)
+    _step("[3/5] calibrating one rational TMF per position in one vectorised call")
     order = (2, 4)  # the chain's T_TE: two zeros from the couplings, four poles
     t0 = time.perf_counter()
     tmf, report = jaxvs.fit_rational(
@@ -61,7 +70,7 @@ def run_demo(out: str = "demo-report", n_positions: int = 8, seed: int = 0) -> i
     err_fit = np.linalg.norm(H_fit - H_true, axis=-1) / np.linalg.norm(H_true, axis=-1)
     err_meas = np.linalg.norm(H - H_true, axis=-1) / np.linalg.norm(H_true, axis=-1)
 
-    print("[4/5] virtual sensor: TCP position from the encoder through the TMF ...", flush=True)
+    _step("[4/5] virtual sensor: TCP position from the encoder through the TMF")
     # Tustin (trapezoidal) keeps the phase at 100-200 Hz where zero-order hold would add
     # half a sample of delay; Euler/Heun are unstable for these modes at 1 kHz.
     x_hat = np.asarray(jaxvs.simulate(tmf, jnp.asarray(data.x_encoder), dt, method="tustin"))
@@ -146,7 +155,7 @@ def run_demo(out: str = "demo-report", n_positions: int = 8, seed: int = 0) -> i
     print(md)
     print()
 
-    print("[5/5] sim-to-real gap diagnosis of a drive twin with a hidden effect ...", flush=True)
+    _step("[5/5] sim-to-real gap diagnosis of a drive twin with a hidden effect")
     from jaxvs.plotting import plot_diagnosis
     from jaxvs.twins import DriveTwin, draw_drive_effect
 
@@ -157,6 +166,7 @@ def run_demo(out: str = "demo-report", n_positions: int = 8, seed: int = 0) -> i
     val = drive.experiment(k4, duration=7.5)
     report = jaxvs.diagnose(cal, val, family="drive", progress=True)
     diag_dir = out_dir / "diagnosis"
+    _step("writing the diagnosis report")
     report.content["figures"] = plot_diagnosis(report, diag_dir)
     report.save(diag_dir)
     print()
@@ -166,9 +176,13 @@ def run_demo(out: str = "demo-report", n_positions: int = 8, seed: int = 0) -> i
         f"found: {report.verdict['primary'] or 'none'})"
     )
     print()
-    print(
-        f"wrote {out_dir / 'report.json'}, {out_dir / 'report.md'}, "
-        f"{out_dir / 'tmf_family_bode.png'}, {diag_dir}/report.json, report.md and figures "
-        f"({time.perf_counter() - t_start:.1f} s)"
-    )
-    return 0
+    written = ["report.json", "report.md", "tmf_family_bode.png", "diagnosis/report.json"]
+    return 0, written, time.perf_counter() - t_start
+
+
+def _step(text: str) -> None:
+    """Print a step of the demo and tell the interrupt handler where it is."""
+    from ._interrupt import stage
+
+    print(f"{text} ...", flush=True)
+    stage(text)

@@ -195,8 +195,15 @@ class Progress:
                 f"({self.elapsed:.1f} s)"
             )
             self.interrupted = True
-            self.log("interrupted", logging.WARNING)
-            print(self.message, file=sys.stderr)
+            from . import _interrupt
+
+            # The jaxvs command prints one line for everything (logging's last-resort
+            # handler would print a WARNING as a second line).
+            self.log("interrupted", logging.INFO if _interrupt.installed() else logging.WARNING)
+            if _interrupt.installed():
+                _interrupt.note(f"{self.description} ({done} {self.unit}s done)")
+            else:
+                print(self.message, file=sys.stderr)
             if self.on_interrupt == "return":
                 return True
             raise Interrupted(self.message) from None

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ._csv_dialect import decimal_hint, delimiter_hint, encoding_error
 from ._record import DEFAULT_TIME_RTOL, Record
 from ._units import ORIGINAL_UNITS_KEY, convert_units, parse_header, to_si
 
@@ -254,6 +255,9 @@ def load(
     time: str = "t",
     dt: float | None = None,
     time_rtol: float = DEFAULT_TIME_RTOL,
+    delimiter: str = ",",
+    decimal: str = ".",
+    encoding: str = "utf-8",
 ) -> Record | list[Record]:
     """Load the time series of a measurement file, recognised by suffix and content.
 
@@ -282,6 +286,8 @@ def load(
     - `time`: name of the time column [s] (CSV, NPZ, MAT, HDF5; ignored for EMPS files).
     - `dt`: sampling period [s] for CSV/NPZ/MAT/HDF5 files without a time column.
     - `time_rtol`: tolerance of the uniform-time check, relative to the sampling period.
+    - `delimiter`, `decimal`, `encoding`: the CSV dialect (see `load_csv`; other formats
+      ignore them).
 
     **Returns:**
 
@@ -302,7 +308,8 @@ def load(
 
         if is_twincat_scope(file):
             return _one_or_list(load_twincat_scope(file, names=names, time_rtol=time_rtol))
-        return load_csv(file, **options)  # type: ignore[arg-type]
+        dialect = dict(delimiter=delimiter, decimal=decimal, encoding=encoding)
+        return load_csv(file, **options, **dialect)  # type: ignore[arg-type]
     if kind == ".npz":
         return load_npz(file, **options)  # type: ignore[arg-type]
     if kind == ".mat":
@@ -400,6 +407,8 @@ def load_csv(
     time: str = "t",
     dt: float | None = None,
     delimiter: str = ",",
+    decimal: str = ".",
+    encoding: str = "utf-8",
     time_rtol: float = DEFAULT_TIME_RTOL,
 ) -> Record:
     """Load a CSV file with a header row: one column per signal, time column `t` [s].
@@ -409,7 +418,10 @@ def load_csv(
     `# metadata: {...}` (JSON, as written by `save_csv`) becomes the record's metadata.
     Every other cell must be a number (`nan`/`inf` are parsed and then rejected by `Record`).
 
-    **Arguments:** as `load`, plus `delimiter` (default `,`).
+    **Arguments:** as `load`, plus `delimiter` (default `,`; `;` for many European
+    spreadsheets), `decimal` (the decimal mark, default `.`; `,` for `0,5`) and `encoding`
+    (default UTF-8, a byte-order mark is skipped; `latin-1` for older spreadsheets). A file
+    that looks written in another dialect is refused with the option that reads it.
 
     **Returns:**
 
@@ -424,8 +436,22 @@ def load_csv(
     file = _existing_file(path)
     source = f"CSV file {str(file)!r}"
     metadata: dict[str, Any] = {}
-    with open(file, newline="", encoding="utf-8-sig") as handle:
-        lines = handle.read().splitlines()
+    raw = file.read_bytes()
+    try:
+        utf8 = encoding.lower().replace("_", "-") in ("utf-8", "utf8")
+        text = raw.decode("utf-8-sig" if utf8 else encoding)
+    except UnicodeDecodeError as error:
+        raise ValueError(encoding_error(source, error, raw, encoding)) from None
+    except LookupError:
+        raise ValueError(
+            f"load_csv: unknown encoding {encoding!r}; use e.g. 'utf-8' or 'latin-1'."
+        ) from None
+    if len(decimal) != 1 or decimal == delimiter or len(delimiter) != 1:
+        raise ValueError(
+            f"load_csv: delimiter {delimiter!r} and decimal {decimal!r} must be two different "
+            "single characters, e.g. delimiter=';', decimal=','."
+        )
+    lines = text.splitlines()
     # Leading blank and comment lines are read as raw text: JSON metadata holds commas and
     # quotes that a CSV reader would split.
     first = 0
@@ -438,6 +464,8 @@ def load_csv(
     header = next(rows, None)
     if header is None:
         raise ValueError(f"{source} is empty; it needs a header row such as 't,q,u'.")
+    if len(header) == 1 and (hint := delimiter_hint(lines[first], delimiter)):
+        raise ValueError(f"{source}, line {first + 1}: {hint}")
     column_names: list[str] = []
     units: dict[str, str] = {}
     for i, cell in enumerate(header):
@@ -460,20 +488,25 @@ def load_csv(
         if len(row) != len(column_names):
             raise ValueError(
                 f"{source}, line {line}: {len(row)} cells but the header has "
-                f"{len(column_names)} columns."
+                f"{len(column_names)} columns; complete or remove that line (a truncated "
+                "file ends this way)."
             )
         parsed = []
         for name, cell in zip(column_names, row):
             try:
-                parsed.append(float(cell))
+                parsed.append(float(cell if decimal == "." else cell.replace(decimal, ".")))
             except ValueError:
                 raise ValueError(
-                    f"{source}, line {line}, column {name!r}: cell {cell!r} is not a number. "
-                    "Every cell below the header must be numeric."
+                    f"{source}, line {line}, column {name!r}: cell {cell!r} is not a number; "
+                    + (
+                        decimal_hint(cell, decimal)
+                        or "every cell below the header must be numeric (write nan for a "
+                        "missing value)."
+                    )
                 ) from None
         values.append(parsed)
     if not values:
-        raise ValueError(f"{source} has a header but no data rows.")
+        raise ValueError(f"{source} has a header but no data rows; add one row per sample.")
     table = np.asarray(values, dtype=np.float64)
     columns = {name: table[:, i] for i, name in enumerate(column_names)}
     return _build(
