@@ -96,10 +96,12 @@ def true_structure(rec: dict, role: np.ndarray, dt: float) -> dict:
     }
 
 
-def recovery_and_speed(quick: bool) -> dict:
+def recovery_and_speed(quick: bool, hidden: tuple[int, ...] = (3, 6)) -> dict:
     hours, dt = (12.0, 60.0) if quick else (24.0, 60.0)
     rec = spindle_records(hours, dt)
-    kw = dict(hidden=(3, 6) if quick else (3, 6, 10, 15), inits=2 if quick else 3)
+    # default hidden sizes 3 and 6: 330 candidate designs, enough for the >= 256 target
+    # (`--hidden 3,6,10,15` adds the study's sizes: 420 designs, longer loop reference)
+    kw = dict(hidden=hidden, inits=2 if quick else 3)
     t0 = time.perf_counter()
     load0 = os.getloadavg()
     rep = jaxvs.design(rec, target="T_bearing", progress=False, **kw)
@@ -111,6 +113,10 @@ def recovery_and_speed(quick: bool) -> dict:
     rep_loop = jaxvs.design(rec, target="T_bearing", progress=False, compare_loop=True, **kw)
     wall_loop = time.perf_counter() - t1
     groups = rep_loop["timing"]["groups"]
+    # the second search finds its programs compiled already: compile times of the first
+    first = {g["group"]: g for g in rep["timing"]["groups"]}
+    for g in groups:
+        g["compile_s"] = max(g["compile_s"], first[g["group"]]["compile_s"])
     batch_run = sum(g["run_s"] for g in groups)
     loop_run = sum(g["loop_run_s"] for g in groups)
     net = [g for g in groups if g["group"].startswith("network")]
@@ -120,6 +126,8 @@ def recovery_and_speed(quick: bool) -> dict:
         "hours": hours,
         "dt_s": dt,
         "samples": len(rec["t"]),
+        "hidden": list(kw["hidden"]),
+        "inits": kw["inits"],
         "distractors": list(DISTRACTORS),
         "candidates_evaluated": rep["candidates_evaluated"],
         "wall_s": wall,
@@ -325,7 +333,9 @@ def markdown(res: dict) -> str:
         f"Twin effects {RECOVERY_EFFECTS} (air temperature unmeasured); "
         f"{r['hours']:.0f} h of random speed parts at "
         f"{r['dt_s']:.0f} s ({r['samples']} samples); candidate inputs T_chassis, v_m and the "
-        f"distractors {', '.join(r['distractors'])}; last 30 % held out as one block. "
+        f"distractors {', '.join(r['distractors'])}; last 30 % held out as one block; "
+        f"networks with {', '.join(map(str, r.get('hidden', [])))} hidden units, "
+        f"{r.get('inits', '?')} initialisations each. "
         f"{r['candidates_evaluated']} candidate designs in {r['wall_s']:.0f} s (load average "
         f"{r['load_before_after'][0]:.1f} -> {r['load_before_after'][1]:.1f} on 2 cores shared "
         "with other jobs).",
@@ -464,8 +474,9 @@ def main():
     p.add_argument(
         "--merge", action="store_true", help="only merge the saved sections into json + md"
     )
+    p.add_argument("--hidden", default="3,6", help="recovery section: network hidden sizes")
     args = p.parse_args()
-    from jaxvs.studies.design._report import _clean
+    from jaxvs._misc import json_safe
 
     suffix = "_quick" if args.quick else ""
     out = ROOT / "results"
@@ -473,7 +484,9 @@ def main():
     parts = out / f".design_study{suffix}_parts"
     parts.mkdir(exist_ok=True)
     runs = {
-        "recovery": lambda: recovery_and_speed(args.quick),
+        "recovery": lambda: recovery_and_speed(
+            args.quick, tuple(int(h) for h in args.hidden.split(","))
+        ),
         "table4": lambda: table4(args.quick),
         "emps": lambda: emps(args.quick),
         "frf": frf_orders,
@@ -482,7 +495,7 @@ def main():
         for name in args.sections.split(","):
             t0 = time.perf_counter()
             result = runs[name]()
-            (parts / f"{name}.json").write_text(json.dumps(_clean(result), indent=2) + "\n")
+            (parts / f"{name}.json").write_text(json.dumps(json_safe(result), indent=2) + "\n")
             print(
                 f"{name}: {time.perf_counter() - t0:.0f} s, load {os.getloadavg()[0]:.1f}",
                 flush=True,

@@ -157,7 +157,8 @@ def _parser() -> argparse.ArgumentParser:
         description=(
             "Recalibrate the family's nominal model on the DATA experiments, map where it "
             "still disagrees with the measurements, name the unmodelled effect(s) that close "
-            "the gap on held-out data, and write report.json, report.md and figures to --out. "
+            "the gap on held-out data, and write report.json, report.md, report.html and figures "
+            "to --out. "
             "DATA: CSV (header row, time column t [s]), NPZ, MAT or HDF5 files with the "
             "canonical signal names of the family, or the EMPS .mat files as they are."
         ),
@@ -327,7 +328,8 @@ def _check(args) -> int:
         folder.commit()
     print(report.to_markdown())
     if folder is not None:
-        print(f"written: {folder.out / 'report.json'}, {folder.out / 'report.md'}")
+        names = ("report.json", "report.md", "report.html")
+        print("written: " + ", ".join(str(folder.out / n) for n in names))
     return report.exit_code
 
 
@@ -363,7 +365,7 @@ def _diagnose(args) -> int:
         report.save(staging)
         folder.commit()
         print(f"jaxvs: not identifiable: {report.content['not_identifiable']}", file=sys.stderr)
-        print(f"written: {out / 'report.json'}, {out / 'report.md'}")
+        print(f"written: {out / 'report.json'}, {out / 'report.md'}, {out / 'report.html'}")
         return EXIT_NOT_IDENTIFIABLE
     if not args.no_figures:
         from .plotting import plot_diagnosis
@@ -374,7 +376,7 @@ def _diagnose(args) -> int:
     report.save(staging)
     folder.commit()
     print(report.to_markdown())
-    print(f"written: {out / 'report.json'}, {out / 'report.md'}")
+    print(f"written: {out / 'report.json'}, {out / 'report.md'}, {out / 'report.html'}")
     return EXIT_OK
 
 

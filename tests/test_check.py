@@ -96,3 +96,23 @@ def test_cli_exit_codes_and_report(tmp_path):
     assert main(["check", str(bad), "--family", "thermal", *opts]) == 3
     assert main(["check", str(tmp_path / "missing.csv"), "--family", "thermal"]) == 2
     assert main(["check", str(good), "--family", "drive"]) == 2  # no q, u: user error
+
+
+def test_signal_quality_tells_held_set_points_from_clipping():
+    """A speed profile of held operating points sits at its extremes for long stretches
+    by design (no warning); a sine of amplitude 2 clipped at ±1 sits there because of the
+    clipping (warning; oracle: the share of samples where |2 sin| >= 1, 2/3)."""
+    from jaxvs.data import signal_quality
+
+    speed = np.repeat([0.0, 1500.0, 3000.0, 4500.0, 0.0, 3000.0], 100)
+    force = 2.0 * np.sin(2 * np.pi * np.arange(600) / 100 + 0.1)
+    clipped = np.clip(force, -1.0, 1.0)
+    summary, blocking, warnings = signal_quality({"v_m": speed, "u": clipped}, name="r")
+    assert not blocking
+    assert summary["v_m"]["held_share"] > 0.9  # only the steps between levels differ
+    assert not [w for w in warnings if "'v_m'" in w]
+    # equal up to the samples where the sine crosses ±1 between two samples (tie rounding)
+    assert summary["u"]["clipped_share"] == pytest.approx(np.mean(np.abs(force) >= 1.0), abs=0.01)
+    assert [w for w in warnings if "'u' sits at its minimum or maximum" in w]
+    _, blocking, _ = signal_quality({"u": np.ones(50)}, name="r", required=("u",))
+    assert blocking == ["r: signal 'u' is constant; it carries no information."]

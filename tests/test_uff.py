@@ -119,12 +119,11 @@ def test_impact_records_round_trip(tmp_path, shared_data):
     data = np.load(shared_data / "pyFRF_impact" / "measurements_1.npy")
     rec = Record({"force": data[1], "acc": data[2]}, t=data[0], units={"force": "N", "acc": "g"})
     back = load_uff_record(save_uff(tmp_path / "hit.uff", rec))
-    # A UFF 'g' is standard gravity: loaded in m/s^2, the label kept in original_units.
+    # the label "g" is written as is and read back as standard gravity, in SI
     assert back.names == ("force", "acc") and back.units == {"force": "N", "acc": "m/s^2"}
-    assert back.metadata["original_units"] == {"acc": "g0"}
+    assert back.metadata["original_units"] == {"acc": "g"}
     assert back.dt == rec.dt and back.t0 == rec.t0  # 3.90625e-05 s is exact in the header
-    # g0 = 9.80665 m/s^2 exactly (CGPM 1901); one float64 multiplication: 1 ulp.
-    np.testing.assert_allclose(back["acc"], rec["acc"] * 9.80665, rtol=1e-15)
+    np.testing.assert_allclose(back["acc"], rec["acc"] * 9.80665, rtol=1e-15)  # one product
     np.testing.assert_array_equal(back["force"], rec["force"])
 
 
@@ -242,11 +241,11 @@ def test_inconsistent_units_and_grids(tmp_path):
     f = np.arange(1.0, 11.0)
     H = np.ones(10) * (1 + 1j)
     mixed = write_with_pyuff(
-        tmp_path / "mixed.uff", [frf_set(H, f, 1), frf_set(H, f, 2, num_unit="g")]
+        tmp_path / "mixed.uff", [frf_set(H, f, 1), frf_set(H, f, 2, num_unit="mm")]
     )
-    with pytest.raises(ValueError, match="inconsistent units: dataset 1 .* in g per N"):
+    with pytest.raises(ValueError, match="inconsistent units: dataset 1 .* in m per N"):
         load_uff_frf(mixed)
-    assert load_uff_frf(mixed, index=[1]).output_unit == "g"
+    assert load_uff_frf(mixed, index=[1]).output_unit == "m"
     kinds = write_with_pyuff(
         tmp_path / "kinds.uff", [frf_set(H, f, 1), frf_set(H, f, 2, num_spec=8, num_unit="m/s^2")]
     )
@@ -279,3 +278,54 @@ def test_writer_and_reader_input_checks(tmp_path):
         load_uff_frf(bad)
     with pytest.raises(ValueError, match="layout must be"):
         load_uff_frf(bad, layout="grid")
+
+
+def test_units_map_to_si(tmp_path):
+    """Unit labels through the units handling (g, m/s2, mm, kN) and unlabelled axes
+    through a 164 unit system (mm, N: length factor 1000), into SI, with the file's units
+    in the metadata; a g-per-N accelerance and an m/s^2-per-N one load as one FRFData.
+    Oracle: the values written, scaled by the unit definitions."""
+    f = np.arange(1.0, 11.0)
+    H = (1 + 1j) * np.linspace(1.0, 2.0, 10)
+    frfs = write_with_pyuff(
+        tmp_path / "g.uff",
+        [frf_set(H, f, 1, num_unit="g"), frf_set(H, f, 2, num_unit="m/s2", den_unit="kN")],
+    )
+    frf = load_uff_frf(frfs, layout="batch")
+    assert (frf.output_unit, frf.input_unit) == ("m/s^2", "N")
+    np.testing.assert_allclose(frf.H[0], H * 9.80665, rtol=ASCII_RTOL)
+    np.testing.assert_allclose(frf.H[1], H / 1000.0, rtol=ASCII_RTOL)
+    assert dict(frf.metadata["original_units"]) == {
+        "dataset 0": "g per N",
+        "dataset 1": "m/s2 per kN",
+    }
+    t = np.arange(32) * 1e-3
+    sets = [
+        pyuff.prepare_164(
+            units_code=5, units_description="mm-N", length=1000.0, force=1.0, temp=1.0,
+            temp_offset=273.15,
+        ),
+    ]  # fmt: skip
+    for node, spec, label in ((1, 8, "NONE"), (2, 12, "NONE"), (3, 8, "mm"), (4, 12, "EU")):
+        sets.append(
+            pyuff.prepare_58(
+                func_type=1, rsp_node=node, rsp_dir=3, ref_node=0, ref_dir=0,
+                abscissa_spacing=1, abscissa_spec_data_type=17, ordinate_spec_data_type=spec,
+                orddenom_spec_data_type=0, ordinate_axis_units_lab=label,
+                data=np.cos(t) + node, x=t,
+            )
+        )  # fmt: skip
+    rec = load_uff_record(write_with_pyuff(tmp_path / "mm.unv", sets))
+    assert rec.units == {"1+Z": "m", "2+Z": "m/s^2", "3+Z": "m", "4+Z": ""}
+    for node in (1, 2, 3):  # mm, mm/s^2 (164 system) and a "mm" label: / 1000
+        np.testing.assert_allclose(rec[f"{node}+Z"], (np.cos(t) + node) / 1000, rtol=ASCII_RTOL)
+    np.testing.assert_allclose(rec["4+Z"], np.cos(t) + 4, rtol=ASCII_RTOL)  # EU: as written
+    assert rec.metadata["original_units"] == {
+        "1+Z": "m in UFF 164 unit system 5",
+        "2+Z": "m/s^2 in UFF 164 unit system 5",
+        "3+Z": "mm",
+        "4+Z": "EU",
+    }
+    bad = sets[:1] + [dict(sets[1], ordinate_axis_units_lab="bananas")]
+    with pytest.raises(ValueError, match="unknown unit 'bananas'"):
+        load_uff_record(write_with_pyuff(tmp_path / "bad.unv", bad))

@@ -95,6 +95,24 @@ class CalibrationResult(eqx.Module):
         )
         return "\n".join(lines)
 
+    def _repr_html_(self) -> str:
+        """The estimates as a table (notebooks)."""
+        from .._html import table
+
+        vals, ci = np.asarray(self.values), np.asarray(self.confidence_intervals)
+        if vals.ndim != 1:
+            return f"<p>{self.summary()}</p>"
+        rows = [
+            (n, float(v), float(s), f"[{lo:.6g}, {hi:.6g}]")
+            for n, v, s, (lo, hi) in zip(self.names, vals, np.asarray(self.std_errors), ci)
+        ]
+        head = ("parameter", "value", "std error", f"{100 * self.confidence:g} % interval")
+        return (
+            f"<p><strong>CalibrationResult</strong>: {describe(self.result)}; cost "
+            f"{float(self.cost):.6g}, σ² {float(self.sigma2):.3g}, dof {self.dof}, "
+            f"{int(self.num_steps)} steps</p>" + table(head, rows, markup=False)
+        )
+
 
 # ----------------------------------------------------------------------------- free leaves
 

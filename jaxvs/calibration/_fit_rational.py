@@ -106,6 +106,27 @@ class FitReport(eqx.Module):
         ]
         return "\n".join(lines)
 
+    def _repr_html_(self) -> str:
+        """The fit as a table (notebooks)."""
+        from .._html import table
+
+        if np.ndim(self.relative_error):
+            return f"<p>{self.summary()}</p>"
+        rows = [
+            ("result", describe(self.result)),
+            ("relative error", float(self.relative_error)),
+            ("residual norm", float(self.residual_norm)),
+            ("noise variance", float(self.noise_variance)),
+            ("numerator std errors", np.array2string(np.asarray(self.num_stderr), precision=3)),
+            ("denominator std errors", np.array2string(np.asarray(self.den_stderr), precision=3)),
+            ("Jacobian condition", float(self.jacobian_condition)),
+            ("frequency scale [rad/s]", float(self.frequency_scale)),
+            ("Levenberg-Marquardt steps", int(self.num_steps)),
+            ("Sanathanan-Koerner iterations", int(self.num_init_steps)),
+            ("poles reflected", bool(self.flipped)),
+        ]
+        return "<p><strong>FitReport</strong></p>" + table(("", "value"), rows, markup=False)
+
 
 def _as_order(order) -> tuple[int, int]:
     if isinstance(order, (int, np.integer)) and not isinstance(order, bool):

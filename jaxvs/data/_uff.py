@@ -9,6 +9,8 @@ Kjær, ...). jaxvs reads
   [`FRFData`][jaxvs.data.FRFData];
 - dataset **151** (header: model name, description, creating program) and **164**
   (unit system) into the metadata;
+- units: unit labels through jaxvs's units handling and unlabelled axes through the 164
+  unit system's factors, into SI (the file's units in `metadata["original_units"]`);
 - dataset **55** (data at nodes: mode shapes with frequencies and damping) with
   [`load_uff_modes`][jaxvs.data.load_uff_modes].
 
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import gc
 import os
+import re
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -31,7 +34,7 @@ import numpy as np
 from ._frf import FRFData
 from ._loaders import existing_file
 from ._record import Record
-from ._units import si_record
+from ._units import ORIGINAL_UNITS_KEY, to_si
 
 __all__ = ["load_uff_frf", "load_uff_modes", "load_uff_record", "save_uff", "uff_datasets"]
 
@@ -242,6 +245,58 @@ def _unit(d: dict, axis: str, meta: dict) -> str:
     return _SPEC_UNITS.get(spec, "") if _si_units(meta) else ""
 
 
+# Specific data types whose unit a 164 unit system scales, and the SI value per file
+# unit as a function of the 164 factors (length, force): UFF 164 gives "factors for
+# converting universal file units to SI: divide by the factor".
+_SPEC_SCALE = {
+    8: lambda length, force: 1.0 / length,  # displacement
+    11: lambda length, force: 1.0 / length,  # velocity (time is always s)
+    12: lambda length, force: 1.0 / length,  # acceleration
+    9: lambda length, force: 1.0 / force,  # reaction force
+    13: lambda length, force: 1.0 / force,  # excitation force
+    15: lambda length, force: length**2 / force,  # pressure
+}
+
+
+def _si_scale(d: dict, axis: str, meta: dict, name: str, path: Path) -> tuple[float, str, str]:
+    """`(factor, SI unit, unit in the file)` of one axis of a 58 dataset: a value times
+    `factor` is in the SI unit.
+
+    A unit label goes through jaxvs's units handling: `g` on an ordinate is standard
+    gravity (UFF ordinates are accelerometer channels, never masses), `m/s2` is m/s^2,
+    `EU` (engineering units) stays unconverted. An unlabelled axis of a known specific
+    data type takes the 164 unit system's factors. A label that is no unit is refused, as
+    in every jaxvs reader."""
+    label = _label(d.get(f"{axis}_axis_units_lab"))
+    if label.upper() in ("EU", "E.U."):
+        # "engineering units": the file does not say which; kept as written, unconverted
+        # (pint would read "EU" as the enzyme unit)
+        return 1.0, "", label
+    if label:
+        # UFF writers' spellings: "g" for standard gravity, "m/s2" for m/s^2
+        text = "g0" if label == "g" else re.sub(r"(?<=[A-Za-z])([23])\b", r"^\1", label)
+        one, si = to_si(np.array([0.0, 1.0]), text, name=name, source=str(path))
+        return float(one[1] - one[0]), si, label
+    spec = int(d.get(f"{axis}_spec_data_type", 0) or 0)
+    unit = _SPEC_UNITS.get(spec, "")
+    if _si_units(meta) or spec not in _SPEC_SCALE:
+        return 1.0, unit if _si_units(meta) else "", unit
+    length, force = meta["uff_unit_factors"][:2]
+    code = meta.get("uff_units_code", "?")
+    return _SPEC_SCALE[spec](length, force), unit, f"{unit} in UFF 164 unit system {code}"
+
+
+def _check_abscissa(path: Path, picked, meta: dict, allowed, axis: str, unit_si: str) -> None:
+    """Refuse an abscissa in another unit than jaxvs's (s for time, Hz for frequency)."""
+    for i, s in picked:
+        unit = _unit(s, "abscissa", meta)
+        if unit and unit.lower() not in allowed:
+            raise ValueError(
+                f"{path}: dataset {i} has its {axis} axis in {unit!r}; jaxvs uses {unit_si}. "
+                f"Re-export the file with the abscissa in {unit_si}."
+            )
+
+
 def _select(sets: list[dict], index: Sequence[int] | None, path: Path) -> list[tuple[int, dict]]:
     numbered = list(enumerate(sets))
     if index is None:
@@ -279,16 +334,6 @@ def _functions(path: Path, sets, index, skip_unsupported, wanted: tuple[int, ...
             f"datasets it holds with {other} (or jaxvs.data.load / load_frf)."
         )
     return picked
-
-
-def _check_abscissa(path: Path, picked, meta: dict, allowed, axis: str, unit_name: str) -> None:
-    for i, s in picked:
-        unit = _unit(s, "abscissa", meta)
-        if unit and unit.lower() not in allowed:
-            raise ValueError(
-                f"{path}: dataset {i} has its {axis} in {unit!r}; jaxvs reads it in "
-                f"{unit_name}. Re-export the file with the abscissa in {unit_name}."
-            )
 
 
 def _same_grid(path: Path, picked, axis_name: str) -> np.ndarray:
@@ -337,7 +382,7 @@ def load_uff_record(
     path, sets = _read(path)
     meta = _metadata(path, sets)
     picked = _functions(path, sets, index, skip_unsupported, (_FUNC_TIME,), "time response")
-    _check_abscissa(path, picked, meta, _TIME_UNITS, "time axis", "s")
+    _check_abscissa(path, picked, meta, _TIME_UNITS, "time", "s")
     t = _same_grid(path, picked, "time")
     ids = [_label(s.get("id1")) for _, s in picked]
     if all(ids) and len(set(ids)) == len(ids):
@@ -346,11 +391,14 @@ def load_uff_record(
         names = [_dof(s, "rsp") for _, s in picked]
         if len(set(names)) != len(names):
             names = [f"{n}#{i}" for n, (i, _) in zip(names, picked)]
-    signals = {n: np.asarray(s["data"], dtype=float) for n, (_, s) in zip(names, picked)}
-    units = {n: _unit(s, "ordinate", meta) for n, (_, s) in zip(names, picked)}
-    # heuristic: a time response in 'g' in a modal test file is an acceleration in standard
-    # gravity, never a mass in grams.
-    units = {n: "g0" if u == "g" else u for n, u in units.items()}
+    signals, units, original = {}, {}, {}
+    for n, (_, s) in zip(names, picked):
+        factor, units[n], written = _si_scale(s, "ordinate", meta, n, path)
+        signals[n] = np.asarray(s["data"], dtype=float) * factor
+        if written != units[n]:
+            original[n] = written
+    if original:
+        meta[ORIGINAL_UNITS_KEY] = original
     meta["uff_dofs"] = {n: (_dof(s, "rsp"), _dof(s, "ref")) for n, (_, s) in zip(names, picked)}
     if t.shape[0] < 2:
         raise ValueError(f"{path}: a time record needs at least 2 samples.")
@@ -363,7 +411,7 @@ def load_uff_record(
             record = Record(signals, dt=dt, t0=float(t[0]), units=units, metadata=meta)
     except ValueError as error:
         raise ValueError(f"{source}: {error}") from None
-    return si_record(record, source)
+    return record
 
 
 def _kind(s: dict) -> str:
@@ -430,11 +478,18 @@ def load_uff_frf(
     cohs = [(i, s) for i, s in picked if int(s["func_type"]) == _FUNC_COHERENCE]
     if not frfs:
         raise ValueError(f"{path}: only coherences, no FRF (function type 4 or 5) in the file.")
-    _check_abscissa(path, frfs, meta, _FREQ_UNITS, "frequency axis", "Hz")
+    _check_abscissa(path, frfs, meta, _FREQ_UNITS, "frequency", "Hz")
     f = _same_grid(path, picked, "frequency")
-    described = [
-        (i, _unit(s, "ordinate", meta), _unit(s, "orddenom", meta), _kind(s)) for i, s in frfs
-    ]
+    described, factors, original = [], [], {}
+    for i, s in frfs:
+        fo, out_u, out_w = _si_scale(s, "ordinate", meta, f"dataset {i} numerator", path)
+        fi, in_u, in_w = _si_scale(s, "orddenom", meta, f"dataset {i} denominator", path)
+        described.append((i, out_u, in_u, _kind(s)))
+        factors.append(fo / fi)
+        if (out_w, in_w) != (out_u, in_u):
+            original[f"dataset {i}"] = f"{out_w or '?'} per {in_w or '?'}"
+    if original:
+        meta[ORIGINAL_UNITS_KEY] = original
     first = described[0]
     for d in described[1:]:
         if d[1:] != first[1:]:
@@ -456,7 +511,7 @@ def load_uff_frf(
             f"{len(pairs)} FRFs over {len(outs)} responses x {len(ins)} references. Use "
             "layout='batch'."
         )
-    data = [np.asarray(s["data"], dtype=complex) for _, s in frfs]
+    data = [np.asarray(s["data"], dtype=complex) * k for (_, s), k in zip(frfs, factors)]
     coh_list = [coh_by_pair.get(p) for p in pairs]
     has_coh = all(c is not None for c in coh_list)
     if len(frfs) == 1 and layout != "batch":

@@ -27,7 +27,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..data import Record
+from .._html import markdown_to_html, report_html
+from .._misc import json_safe
+from ..data import Record, signal_quality
 from ._base import GapModel, NotIdentifiable, unwrap
 from ._diagnose import FAMILIES, _check_signals, _records
 
@@ -35,15 +37,12 @@ __all__ = ["CheckReport", "check"]
 
 # heuristics, each documented where it is used
 _SINGULAR_RTOL = 1e-6
-_CLIP_SHARE = 0.01
-_CLIP_RUN = 3
-_QUANT_SHARE = 0.05
 _COHERENCE_MIN = 0.5
 
 
 class CheckReport:
     """What `jaxvs.check` found: `content` (the JSON-ready dict), `ok`, `to_markdown`,
-    `save(folder)` (writes `report.json` and `report.md`)."""
+    `to_html`, `save(folder)` (writes `report.json`, `report.md` and `report.html`)."""
 
     def __init__(self, content: dict[str, Any]):
         self.content = content
@@ -92,7 +91,7 @@ class CheckReport:
             for sig, q in r["signals"].items():
                 lines.append(
                     f"| {r['name']} | {sig} | {100 * q['clipped_share']:.2f} % | "
-                    f"{q['quantisation_step_over_std']:.3g} |"
+                    f"{_fmt(q['quantisation_step_over_std'])} |"
                 )
         ident = c.get("jacobian")
         if ident:
@@ -103,63 +102,40 @@ class CheckReport:
                 "Singular values of the column-scaled Jacobian (largest first): "
                 + ", ".join(f"{s:.3g}" for s in ident["singular_values"]),
                 "",
-                f"Condition number: {ident['condition']:.3g}.",
+                f"Condition number: {_fmt(ident['condition'])}.",
             ]
             for combo in ident["unidentifiable"]:
                 terms = " + ".join(f"{w:+.3f}·{n}" for n, w in combo["combination"].items())
                 lines.append(f"- not identifiable: {terms} (σ/σ_max = {combo['relative']:.2g})")
         return "\n".join(lines) + "\n"
 
+    def to_html(self) -> str:
+        """`report.html`: the Markdown report as one self-contained page."""
+        return report_html(self.to_markdown(), None, f"jaxvs check — {self.content['family']}")
+
+    def _repr_html_(self) -> str:
+        return markdown_to_html(self.to_markdown())
+
     def save(self, folder: str | pathlib.Path) -> pathlib.Path:
+        """Write `report.json`, `report.md` and `report.html` to `folder` (created)."""
         out = pathlib.Path(folder)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "report.json").write_text(json.dumps(self.content, indent=2, default=_json))
+        (out / "report.json").write_text(json.dumps(json_safe(self.content), indent=2) + "\n")
         (out / "report.md").write_text(self.to_markdown())
+        (out / "report.html").write_text(self.to_html())
         return out
 
     def __repr__(self) -> str:
         return f"CheckReport(family={self.content['family']!r}, ok={self.ok})"
 
 
-def _json(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
+def _fmt(value: float) -> str:
+    """A ratio for the report: "∞" for an infinite one (a constant signal, a singular
+    Jacobian)."""
+    return "∞" if math.isinf(value) else f"{value:.3g}"
 
 
 # --- data quality ------------------------------------------------------------------------
-
-
-def _clipped_share(x: np.ndarray) -> float:
-    """Share of samples in runs of >= 3 equal samples at the signal's minimum or maximum.
-
-    Heuristic: a saturated sensor or amplifier sits at its limit for consecutive samples,
-    a signal that merely touches its extreme does not.
-    """
-    span = float(np.ptp(x))
-    if span == 0:
-        return 1.0
-    tol = 1e-9 * span
-    share = 0
-    for level in (x.min(), x.max()):
-        at = np.abs(x - level) <= tol
-        # lengths of the runs of consecutive True
-        edges = np.diff(np.concatenate([[0], at.astype(int), [0]]))
-        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-        runs = stops - starts
-        share += int(runs[runs >= _CLIP_RUN].sum())
-    return share / x.size
-
-
-def _quantisation_step(x: np.ndarray) -> float:
-    """The smallest positive difference between distinct sample values (the resolution
-    when the signal was quantised, else a tiny number)."""
-    levels = np.unique(x)
-    if levels.size < 2:
-        return 0.0
-    return float(np.min(np.diff(levels)))
 
 
 def _excitation_band(x: np.ndarray, fs: float) -> tuple[float, float] | None:
@@ -179,10 +155,10 @@ def _excitation_band(x: np.ndarray, fs: float) -> tuple[float, float] | None:
 
 _INPUTS = {"drive": "u", "tmf": "x_e", "thermal": "T_chassis"}
 _OUTPUTS = {"drive": "q", "tmf": "x_t", "thermal": "T_bearing"}
+_NOT_JUDGED = {"drive": ("r",), "tmf": ("y",), "thermal": ()}
 
 
 def _record_quality(record: Record, name: str, family: str) -> tuple[dict, list[str], list[str]]:
-    blocking, warnings = [], []
     fam = FAMILIES[family]
     summary: dict[str, Any] = {
         "name": name,
@@ -191,33 +167,15 @@ def _record_quality(record: Record, name: str, family: str) -> tuple[dict, list[
         "duration": record.duration,
         "signals": {},
     }
-    for sig in fam.required + tuple(s for s in fam.optional if s in record):
-        x = np.asarray(record[sig], float)
-        std = float(np.std(x))
-        clipped = _clipped_share(x)
-        step = _quantisation_step(x)
-        ratio = step / std if std > 0 else math.inf
-        summary["signals"][sig] = {
-            "clipped_share": clipped,
-            "quantisation_step": step,
-            "quantisation_step_over_std": ratio,
-        }
-        if std == 0:
-            (blocking if sig in fam.required else warnings).append(
-                f"{name}: signal {sig!r} is constant; it carries no information."
-            )
-            continue
-        if clipped > _CLIP_SHARE:
-            warnings.append(
-                f"{name}: {100 * clipped:.1f} % of {sig!r} sits at its minimum or maximum for "
-                "3+ samples (clipping or saturation); exclude those stretches or reduce the "
-                "excitation."
-            )
-        if ratio > _QUANT_SHARE:
-            warnings.append(
-                f"{name}: {sig!r} is quantised coarsely (step {step:.3g} = {ratio:.2f} of its "
-                "standard deviation); raise the excitation or the sensor resolution."
-            )
+    # clipping and quantisation are properties of sensors and amplifiers: a commanded
+    # reference (`r`, whose dwell at the end of a move is by design) and a per-record
+    # setting (the other axis' position `y` of a TMF record) are not judged
+    signals = fam.required + tuple(
+        s for s in fam.optional if s in record and s not in _NOT_JUDGED[family]
+    )
+    summary["signals"], blocking, warnings = signal_quality(
+        {s: record[s] for s in signals if s != "t"}, name=name, required=fam.required
+    )
     u = _INPUTS[family]
     if u in record and np.ptp(record[u]) > 0:
         summary["excitation_band_hz"] = _excitation_band(record[u], record.fs)
@@ -329,6 +287,17 @@ def check(data: Any, *, family: str, **options: Any) -> CheckReport:
     recs = _records(data, "calibration")
     fam = FAMILIES[family](**options)
     _check_signals(fam, recs)
+    return check_records(fam, recs)
+
+
+def check_records(
+    fam: Any, recs: Sequence[tuple[Record, str]], *, raise_value_errors: bool = False
+) -> CheckReport:
+    """`check` on records already read and given their names (`jaxvs.diagnose` calls it
+    before any calibration); `fam` is the family instance with its options. With
+    `raise_value_errors`, a `ValueError` of the family's preprocessing (a bad option, a
+    user error) is raised instead of being reported as blocking."""
+    family = fam.name
     blocking: list[str] = []
     warnings: list[str] = []
     summaries = []
@@ -357,6 +326,8 @@ def check(data: Any, *, family: str, **options: Any) -> CheckReport:
     except NotIdentifiable as error:
         blocking.append(f"the nominal model is not identifiable: {error}")
     except ValueError as error:
+        if raise_value_errors:
+            raise
         blocking.append(f"the family's preprocessing refuses the records: {error}")
     else:
         ident = _jacobian_report(nominal, experiments)

@@ -86,10 +86,12 @@ def _check_sampling(recs: list[tuple[Record, str]]) -> None:
             )
 
 
-def _not_identifiable_report(fam, why, cal_recs, val_recs, how, t_start, res=None):
+def _not_identifiable_report(fam, why, cal_recs, val_recs, how, t_start, res=None, check=None):
     """The report of a record that cannot identify the nominal model: no verdict."""
     names = ", ".join(n for _, n in cal_recs)
     content = {
+        "check": check,
+        "warnings": (check or {}).get("warnings", []),
         "family": fam.name,
         "gap": None,
         "where": [],
@@ -210,12 +212,24 @@ def diagnose(
             how = f"last {holdout:.0%} of the record held out as a contiguous block"
     else:
         how = "validation experiments given"
+    # `jaxvs check` first (DESIGN.md §3.5), on exactly the calibration experiments (the
+    # search then reuses the compiled nominal fit): blocking findings end the run without
+    # a verdict, the others travel with the report as warnings
+    from ._check import check_records
+
+    say("checking the calibration data (jaxvs check)")
+    checked = check_records(fam, cal_recs, raise_value_errors=True).content
+    if checked["blocking"]:
+        why = "jaxvs check: " + " ".join(checked["blocking"])
+        return _not_identifiable_report(fam, why, cal_recs, val_recs, how, t_start, None, checked)
     say(f"preparing {len(cal_recs)} calibration and {len(val_recs)} validation experiment(s)")
     try:
         cal = [fam.prepare(r, n) for r, n in cal_recs]
         val = [fam.prepare(r, n) for r, n in val_recs]
     except NotIdentifiable as err:
-        return _not_identifiable_report(fam, str(err), cal_recs, val_recs, how, t_start)
+        return _not_identifiable_report(
+            fam, str(err), cal_recs, val_recs, how, t_start, None, checked
+        )
 
     res = search(
         fam,
@@ -231,7 +245,7 @@ def diagnose(
     )
     if res.not_identifiable is not None:
         return _not_identifiable_report(
-            fam, res.not_identifiable, cal_recs, val_recs, how, t_start, res
+            fam, res.not_identifiable, cal_recs, val_recs, how, t_start, res, checked
         )
     say("mapping the gap")
     exps = res.calibration + res.validation
@@ -330,6 +344,8 @@ def diagnose(
             "target": fam.target_label,
         },
         "not_identifiable": None,
+        "check": checked,
+        "warnings": list(checked["warnings"]),
         "where": where,
         "where_after": where_after,
         "candidates": cand_json,

@@ -1,4 +1,5 @@
-"""The gap report: the content of `report.json` (DESIGN.md §3.2) and `report.md`."""
+"""The gap report: the content of `report.json` (DESIGN.md §3.2), `report.md` and the
+self-contained `report.html`."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from .._html import markdown_to_html, report_html
 from .._misc import json_safe
 from ._base import Experiment, GapModel
 from ._gapmap import GapCell
@@ -81,18 +83,20 @@ class DiagnosisReport:
                     "",
                     "## Not identifiable: no verdict",
                     "",
-                    f"{c['not_identifiable']}.",
+                    f"{c['not_identifiable'].rstrip('.')}.",
                     "",
+                    *_warnings_markdown(c),
                 ]
             )
         g = c["gap"]
         v = c["verdict"]
-        pct = lambda x: "—" if x is None else f"{100 * x:.2f} %"
+        pct = lambda x: "—" if _num(x) == "—" else f"{100 * x:.2f} %"
         lines = [
             f"# Sim-to-real gap diagnosis — family `{c['family']}`",
             "",
             f"Nominal model: {c['nominal']['model']}.",
             "",
+            *_warnings_markdown(c),
             "## Verdict",
             "",
         ]
@@ -165,26 +169,95 @@ class DiagnosisReport:
                 if k.get("shrink") is not None and ci
                 else "—"
             )
-            par = ", ".join(f"{n} = {val:.4g}" for n, val in (k.get("parameters") or {}).items())
-            dbic = "—" if k.get("delta_bic") is None else f"{k['delta_bic']:.1f}"
+            par = ", ".join(
+                f"{n} = {_num(v, '.4g')}" for n, v in (k.get("parameters") or {}).items()
+            )
+            dbic = _num(k.get("delta_bic"), ".1f")
             null = pct(k.get("null_p95"))
             adm = "yes" if k.get("admissible") else f"no: {k.get('reason')}"
             if k.get("admissible") is None:
                 adm = "—"
             acc = "**yes**" if k["accepted"] else f"no ({k.get('rejected_by') or 'not tried'})"
             lines.append(
-                f"| {k['effect']} | yes | {k['signature']:.3f} | {pct(k.get('validation_gap'))} | "
+                f"| {k['effect']} | yes | {_num(k['signature'], '.3f')} | {pct(k.get('validation_gap'))} | "
                 f"{shr} | {dbic} | {null} | {adm} | {acc} | {par} |"
             )
+        lines += _rounds_markdown(c.get("rounds") or [])
         lines += ["", f"Run time: {c['timing']['seconds']:.1f} s.", ""]
         if c.get("figures"):
             lines += ["## Figures", ""] + [f"![{f}]({f})" for f in c["figures"]] + [""]
         return "\n".join(lines)
 
+    def to_html(self, folder: str | pathlib.Path | None = None) -> str:
+        """`report.html`: the Markdown report as one self-contained page, the figures
+        listed in `content["figures"]` embedded from `folder`, each search round
+        collapsible."""
+        return report_html(self.to_markdown(), folder, f"jaxvs diagnose — {self.content['family']}")
+
+    def _repr_html_(self) -> str:
+        return markdown_to_html(self.to_markdown())
+
     def save(self, out: str | pathlib.Path) -> pathlib.Path:
-        """Write `report.json` and `report.md` to the folder `out` (created)."""
+        """Write `report.json`, `report.md` and `report.html` to the folder `out`
+        (created; figures already in it are embedded in `report.html`)."""
         out = pathlib.Path(out)
         out.mkdir(parents=True, exist_ok=True)
         (out / "report.json").write_text(json.dumps(self.to_json(), indent=2) + "\n")
         (out / "report.md").write_text(self.to_markdown())
+        (out / "report.html").write_text(self.to_html(out))
         return out
+
+
+def _num(value: Any, fmt: str = ".3g") -> str:
+    """A number for a report cell; "—" for a missing or non-finite one."""
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "—"
+    return format(value, fmt)
+
+
+def _warnings_markdown(c: dict[str, Any]) -> list[str]:
+    """The non-blocking findings of `jaxvs check` on the calibration data."""
+    if not c.get("warnings"):
+        return []
+    return ["## Warnings (jaxvs check)", ""] + [f"- {w}" for w in c["warnings"]] + [""]
+
+
+def _rounds_markdown(rounds: list[dict[str, Any]]) -> list[str]:
+    """One `###` section per round of the greedy search (collapsible in `report.html`):
+    every candidate tried, its held-out gap and why it passed or not."""
+    if not rounds:
+        return []
+    lines = ["", "## Search rounds", ""]
+    for h in rounds:
+        tried = h.get("tried") or {}
+        passing = [e for e, t in tried.items() if t.get("passes")]
+        gap = h.get("gap_before")
+        lines += [
+            f"### Round {h.get('round', '?')}: gap before "
+            f"{'—' if gap is None else f'{100 * gap:.2f} %'}, {len(tried)} candidate(s) tried, "
+            f"{len(passing)} passing, {_num(h.get('seconds'), '.1f')} s",
+            "",
+        ]
+        if not tried:
+            lines += ["No candidate was tried in this round.", ""]
+            continue
+        lines += [
+            "| effect | validation gap | shrink | ΔBIC | null threshold | admissible | passes | "
+            "parameters |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for effect, t in tried.items():
+            vg = t.get("validation_gap")
+            par = ", ".join(
+                f"{n} = {_num(v, '.4g')}" for n, v in (t.get("parameters") or {}).items()
+            )
+            adm = t.get("admissible")
+            adm = "—" if adm is None else ("yes" if adm else f"no: {t.get('reason')}")
+            passes = "yes" if t.get("passes") else f"no ({t.get('rejected_by') or 'not tested'})"
+            lines.append(
+                f"| {effect} | {'—' if vg is None else f'{100 * vg:.2f} %'} | "
+                f"{_num(t.get('shrink'), '.2f')} | {_num(t.get('delta_bic'), '.1f')} | "
+                f"{_num(t.get('null_threshold'))} | {adm} | {passes} | {par} |"
+            )
+        lines.append("")
+    return lines

@@ -19,7 +19,7 @@ import numpy as np
 from ...data import Record, load
 from ..thermal import ThermalFitWarning, resample_sparse
 
-__all__ = ["DesignDataWarning", "Experiment", "Prepared", "prepare"]
+__all__ = ["DesignDataWarning", "DesignRecord", "Prepared", "prepare"]
 
 _HEADER = re.compile(r"^\s*(?P<name>[^\[\]]+?)\s*(\[(?P<unit>[^\]]*)\])?\s*$")
 # The fewest training samples of the smallest design, per free parameter (heuristic: a
@@ -28,7 +28,7 @@ _HEADER = re.compile(r"^\s*(?P<name>[^\[\]]+?)\s*(\[(?P<unit>[^\]]*)\])?\s*$")
 _MIN_SAMPLES = 30
 
 
-class Experiment(NamedTuple):
+class DesignRecord(NamedTuple):
     """One experiment of a design search (host arrays).
 
     - `name`: where it came from; `t`: `(time,)` uniform time [s]; `dt` [s].
@@ -60,7 +60,7 @@ class Prepared(NamedTuple):
     - `holdout`: how the held-out samples were chosen (text); `warnings`: texts.
     """
 
-    experiments: list[Experiment]
+    experiments: list[DesignRecord]
     inputs: list[str]
     target: str
     U: np.ndarray
@@ -111,7 +111,7 @@ def _read_csv_nan(path: pathlib.Path) -> tuple[dict[str, np.ndarray], dict[str, 
     return {n: np.asarray(v) for n, v in cols.items()}, units
 
 
-def _from_mapping(data: Mapping[str, Any], name: str, target: str) -> Experiment:
+def _from_mapping(data: Mapping[str, Any], name: str, target: str) -> DesignRecord:
     if "t" not in data:
         raise ValueError(f"design: {name} has no time signal 't' [s]; add it (uniform sampling).")
     t = np.asarray(data["t"], float)
@@ -131,17 +131,17 @@ def _from_mapping(data: Mapping[str, Any], name: str, target: str) -> Experiment
     rec = Record(signals, t=t) if signals else None  # validates time and finiteness
     dt = rec.dt if rec is not None else float(np.median(np.diff(t)))
     sig = {k: np.asarray(rec[k]) for k in rec.names} if rec is not None else {}
-    return Experiment(name, np.asarray(rec.t if rec else t), dt, sig, y, {})
+    return DesignRecord(name, np.asarray(rec.t if rec else t), dt, sig, y, {})
 
 
-def _from_record(rec: Record, name: str, target: str | None) -> Experiment:
+def _from_record(rec: Record, name: str, target: str | None) -> DesignRecord:
     sig = {k: np.asarray(rec[k]) for k in rec.names}
     y = sig.pop(target) if target in sig else np.full(len(rec), np.nan)
     units = {k: u for k, u in rec.units.items() if k in sig}
-    return Experiment(name, np.asarray(rec.t), rec.dt, sig, y, units)
+    return DesignRecord(name, np.asarray(rec.t), rec.dt, sig, y, units)
 
 
-def _read(item: Any, target: str, index: int, has_samples: bool) -> Experiment:
+def _read(item: Any, target: str, index: int, has_samples: bool) -> DesignRecord:
     if isinstance(item, Record):
         if target not in item and not has_samples:
             raise ValueError(
@@ -252,7 +252,7 @@ def _segments(signals: dict[str, np.ndarray], n: int) -> np.ndarray:
     return seg
 
 
-def _resample(exp: Experiment, seg: np.ndarray) -> tuple[np.ndarray, int, float]:
+def _resample(exp: DesignRecord, seg: np.ndarray) -> tuple[np.ndarray, int, float]:
     """The target on the experiment's grid, per segment by first-order laws (study §3.3.1):
     returns `(y, n_measured, rmse_of_the_laws_at_the_measurements)`."""
     ok = np.isfinite(exp.target)

@@ -216,6 +216,9 @@ def design(
         target_samples=target_samples,
         holdout=holdout,
     )
+    checked = _check_data(prep)  # `jaxvs check` on the design data, before any fitting
+    if checked["blocking"]:
+        return _refused(prep, checked, t_start)
     names, y, role, meas, starts = prep.inputs, prep.y, prep.role, prep.measured, prep.starts
     dt = prep.experiments[0].dt
     cal = role != 2
@@ -367,10 +370,64 @@ def design(
             "units": {k: v for e in prep.experiments for k, v in e.units.items()},
             "candidate_inputs": names,
         },
-        "warnings": prep.warnings + extras.pop("warnings"),
+        "warnings": prep.warnings + checked["warnings"] + extras.pop("warnings"),
+        "check": checked,
         "timing": {"seconds": time.perf_counter() - t_start, "groups": timing},
     }
     return DesignReport(content=content, **extras)
+
+
+def _check_data(prep) -> dict[str, Any]:
+    """The data check of `jaxvs check` for a design: clipping, quantisation and constant
+    signals per experiment (target and candidate inputs). Blocking: no candidate input
+    varies anywhere. An input constant within one experiment is normal (a steady
+    operating point) and the data preparation already notes inputs constant everywhere,
+    so those findings are left out."""
+    from ...data import signal_quality
+
+    records, blocking, warnings = [], [], []
+    for e in prep.experiments:
+        signals = {prep.target: e.target, **{k: e.signals[k] for k in prep.inputs}}
+        summary, b, w = signal_quality(signals, name=e.name, required=(prep.target,))
+        records.append({"name": e.name, "samples": int(e.t.size), "signals": summary})
+        blocking += b
+        warnings += [x for x in w if "is constant" not in x]
+    if np.all(np.ptp(prep.U, axis=0) == 0):
+        blocking.append(
+            f"no candidate input of {list(prep.inputs)} varies in the data; a virtual sensor "
+            "needs inputs that change with the target. Record a change of operating point."
+        )
+    return {"records": records, "blocking": blocking, "warnings": warnings}
+
+
+def _refused(prep, checked: dict[str, Any], t_start: float) -> DesignReport:
+    """The report of data the check refuses: no design, `not_identifiable` says why."""
+    content = {
+        "target": prep.target,
+        "metric": "rmse",
+        "designs": [],
+        "best": None,
+        "baseline": {"structure": "regression", "inputs": [], "validation": None},
+        "not_identifiable": "jaxvs check: " + " ".join(checked["blocking"]),
+        "candidates_evaluated": 0,
+        "coverage": {"evaluated": 0, "total": 0, "by_group": {}, "stopped_by": "check"},
+        "interrupted": False,
+        "input_ranking": [],
+        "forward_selection": {"steps": [], "selected": [], "pool": []},
+        "data": {
+            "experiments": len(prep.experiments),
+            "samples": int(prep.y.size),
+            "dt": prep.experiments[0].dt,
+            "holdout": prep.holdout,
+            "stopping_block": "none (no search)",
+            "sparse_target": prep.sparse,
+            "candidate_inputs": list(prep.inputs),
+        },
+        "warnings": prep.warnings + checked["warnings"],
+        "check": checked,
+        "timing": {"seconds": time.perf_counter() - t_start, "groups": []},
+    }
+    return DesignReport(content=content, arrays=_arrays(prep))
 
 
 def _loop_reference(

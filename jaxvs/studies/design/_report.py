@@ -3,9 +3,7 @@ a self-contained `report.html`, the figures and `best.eqx`, written atomically."
 
 from __future__ import annotations
 
-import base64
 import dataclasses
-import html
 import json
 import os
 import pathlib
@@ -15,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ..._html import markdown_to_html, report_html
 from ..._misc import json_safe
 
 __all__ = ["DesignReport"]
@@ -189,42 +188,12 @@ class DesignReport:
         return "\n".join(lines)
 
     def to_html(self, folder: pathlib.Path | None = None) -> str:
-        """A self-contained HTML page: the markdown report with the figures embedded."""
-        body = []
-        in_table = False
-        for line in self.to_markdown().splitlines():
-            if line.startswith("|"):
-                cells = [html.escape(x.strip()) for x in line.strip("|").split("|")]
-                if set("".join(cells)) <= set("-: "):
-                    continue
-                if not in_table:
-                    body.append("<table>")
-                    in_table = True
-                body.append("<tr>" + "".join(f"<td>{x}</td>" for x in cells) + "</tr>")
-                continue
-            if in_table:
-                body.append("</table>")
-                in_table = False
-            if line.startswith("!["):
-                name = line[line.index("(") + 1 : -1]
-                path = None if folder is None else folder / name
-                if path is not None and path.exists():
-                    data = base64.b64encode(path.read_bytes()).decode()
-                    body.append(f'<img src="data:image/png;base64,{data}" style="max-width:100%">')
-            elif line.startswith("# "):
-                body.append(f"<h1>{html.escape(line[2:])}</h1>")
-            elif line.startswith("## "):
-                body.append(f"<h2>{html.escape(line[3:])}</h2>")
-            elif line.strip():
-                body.append(f"<p>{html.escape(line).replace('**', '')}</p>")
-        if in_table:
-            body.append("</table>")
-        style = "body{font-family:sans-serif;max-width:70em;margin:auto}td{padding:2px 8px}"
-        return (
-            f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>jaxvs design: "
-            f"{html.escape(self.content['target'])}</title><style>{style}</style></head>"
-            f"<body>{''.join(body)}</body></html>"
-        )
+        """A self-contained HTML page: the markdown report with the figures in `folder`
+        embedded."""
+        return report_html(self.to_markdown(), folder, f"jaxvs design: {self.content['target']}")
+
+    def _repr_html_(self) -> str:
+        return markdown_to_html(self.to_markdown())
 
     def save(self, out: str | os.PathLike, *, figures: bool = True) -> pathlib.Path:
         """Write `report.json`, `report.md`, `report.html`, the figures and `best.eqx`
