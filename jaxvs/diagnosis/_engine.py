@@ -108,83 +108,6 @@ def _stack_models(models: Sequence[GapModel]) -> GapModel:
     return eqx.combine(stacked, static)
 
 
-def _index_model(models: GapModel, i: int) -> GapModel:
-    arrays, static = eqx.partition(models, eqx.is_array)
-    return eqx.combine(jax.tree_util.tree_map(lambda x: x[i], arrays), static)
-
-
-@eqx.filter_jit
-def _fit_many(models: GapModel, psize, batch, wfit, max_steps: int, data_axis: int | None):
-    """For each stacked starting model (same structure): least-squares values of the
-    parameters selected by `psize` (the candidate's sizes, one one-hot column each), then
-    LM on every free parameter (weights `wfit`: zero on held-out rows). With `data_axis`
-    0, `batch` and `wfit` carry one data set per model (the null records); with `None`
-    every model sees the same data. Returns the calibrated (constrained) models, the cost
-    after LM and after the least-squares start, and the predictions on every row."""
-
-    def one(model: GapModel, ps, batch, wfit):
-        inputs = _model_inputs(batch)
-        y = batch["y"]
-        spec = free_spec(model)
-        params, static = eqx.partition(model, spec)
-        flat, unravel = jax.flatten_util.ravel_pytree(params)
-
-        def resid(theta):
-            m = unwrap(eqx.combine(unravel(theta), static))
-            return ((jax.vmap(m)(inputs) - y) * wfit).ravel()
-
-        # least-squares start of the candidate's sizes (exact when it is linear in them)
-        r0 = resid(flat)
-        js = jax.vmap(lambda v: jax.jvp(resid, (flat,), (v,))[1])(ps.T)  # (s, N)
-        norms = jnp.linalg.norm(js, axis=1)
-        safe = jnp.where(norms > 0, norms, 1.0)
-        jn = js / safe[:, None]
-        gram = jn @ jn.T + 1e-10 * jnp.eye(jn.shape[0], dtype=jn.dtype)
-        delta = -jnp.linalg.solve(gram, jn @ r0) / safe
-        delta = jnp.where(jnp.all(jnp.isfinite(delta)), delta, 0.0)
-        flat = flat + ps @ delta
-
-        def evaluate(theta, args):
-            r = resid(theta)
-            jac = jax.jacfwd(resid)(theta)
-            return 0.5 * jnp.dot(r, r), jac.T @ jac, jac.T @ r
-
-        state = lm_init(evaluate, flat, None, 1e-8)
-        cost_start = state.cost
-        state = jax.lax.while_loop(
-            lambda s: lm_running(s, max_steps),
-            lambda s: lm_step(evaluate, lambda t: jnp.asarray(True), s, None, 1e-8),
-            state,
-        )
-        final = eqx.combine(unravel(state.theta), static)
-        pred = jax.vmap(unwrap(final))(inputs)
-        return final, state.cost, cost_start, pred
-
-    return eqx.filter_vmap(one, in_axes=(0, 0, data_axis, data_axis))(models, psize, batch, wfit)
-
-
-def size_selector(model: GapModel, slot: int | None, width: int) -> np.ndarray:
-    """One-hot columns selecting the `size` entries of effect `slot` in the flat vector of
-    the model's free parameters (zero columns pad to `width`)."""
-    cm = model.constrained()
-    params, _ = eqx.partition(cm, free_spec(cm))
-    marker = jax.tree_util.tree_map(jnp.zeros_like, params)
-    n_all = int(jax.flatten_util.ravel_pytree(marker)[0].size)
-    out = np.zeros((n_all, width))
-    if slot is None or not hasattr(model.effects[slot], "size"):
-        return out
-    leaf = marker.effects[slot].size
-    marker = eqx.tree_at(
-        lambda m: m.effects[slot].size, marker, jnp.arange(1, leaf.size + 1, dtype=leaf.dtype)
-    )
-    flat = np.asarray(jax.flatten_util.ravel_pytree(marker)[0])
-    for k in range(1, int(leaf.size) + 1):
-        idx = np.flatnonzero(flat == k)
-        if idx.size and k - 1 < width:
-            out[idx[0], k - 1] = 1.0
-    return out
-
-
 def fit_many(
     models: Sequence[GapModel],
     slots: Sequence[int | None],
@@ -192,16 +115,14 @@ def fit_many(
     n_cal: int,
     scale: float,
     max_steps: int,
-    layout: Layout | None = None,
+    layout: Layout,
 ) -> tuple[list[GapModel], np.ndarray, np.ndarray, list[list[np.ndarray]]]:
     """Calibrate several starting models of one structure on the first `n_cal`
-    experiments in one vectorised call (the sizes of effect `slots[i]` of start `i` are
-    first set by least squares). `experiments` is one list of experiments for all the
-    models, or one list per model (the null records: start `i` on data set `i`).
-    With a `layout` that covers the models, they are calibrated through its one fixed
-    structure, so the compiled function is shared with every
-    other structure of the search.
-    Returns the (physical) models, their calibration SSR after LM and at the
+    experiments through the one fixed structure of `layout` (so the compiled function is
+    shared with every other structure of the search); the sizes of effect `slots[i]` of
+    start `i` are first set by least squares. `experiments` is one list of experiments
+    for all the models, or one list per model (the null records: start `i` on data set
+    `i`). Returns the (physical) models, their calibration SSR after LM and at the
     least-squares start (the signature), and their predictions on every experiment."""
     per_model = not isinstance(experiments[0], Experiment)
     if per_model:
@@ -215,27 +136,15 @@ def fit_many(
         wfit = batch["w"].at[n_cal:].set(0.0)
         data_axis = None
         exp_lists = [list(experiments)] * len(models)
-    if layout is not None and layout.covers(models[0]) and all(k in batch for k in layout.keys):
-        fitted, cost, cost_start, pred = _fit_layout(
-            layout, models, slots, batch, wfit, max_steps, data_axis
+    if not layout.covers(models[0]) or not layout.keys <= set(batch):
+        raise ValueError(
+            f"fit_many: the layout has slots {layout.names} for data {sorted(layout.keys)}; "
+            f"got effects {models[0].effect_names} and data {sorted(batch)}. Build the "
+            "layout from the library and the refreshed experiments."
         )
-        return _finish(fitted, cost, cost_start, pred, exp_lists, scale)
-    width = max(
-        [
-            int(np.size(m.effects[s].size))
-            for m, s in zip(models, slots)
-            if s is not None and hasattr(m.effects[s], "size")
-        ]
-        or [1]
+    fitted, cost, cost_start, pred = _fit_layout(
+        layout, models, slots, batch, wfit, max_steps, data_axis
     )
-    psize = jnp.asarray(np.stack([size_selector(m, s, width) for m, s in zip(models, slots)]))
-    stacked = _stack_models([m.constrained() for m in models])
-    out, cost, cost_start, pred = _fit_many(stacked, psize, batch, wfit, max_steps, data_axis)
-    fitted = [_index_model(out, i) for i in range(len(models))]
-    return _finish(fitted, cost, cost_start, pred, exp_lists, scale)
-
-
-def _finish(fitted, cost, cost_start, pred, exp_lists, scale):
     cost = np.asarray(cost) * 2.0 / scale**2
     cost = np.where(np.isfinite(cost), cost, np.inf)
     cost_start = np.asarray(cost_start) * 2.0 / scale**2
@@ -625,8 +534,10 @@ def search(
         )
 
     say("recalibrating the nominal model")
+    # the nominal model alone: a layout without slots (one call per start)
+    bare = Layout([], exps[0].arrays.keys(), batch=1)
     (model,), cost, _, (pred,) = fit_many(
-        [GapModel(family.nominal(calibration))], [None], exps, n_cal_exp, scale, max_steps
+        [GapModel(family.nominal(calibration))], [None], exps, n_cal_exp, scale, max_steps, bare
     )
     nominal_model = model
     res_all = [e.y - p for e, p in zip(exps, pred)]
@@ -662,7 +573,7 @@ def search(
     say(f"simulating {n_null} effect-free records of the same set-up (the null)")
     null_sets = family.null_experiments(model, exps, rng, n_null)
     null_fit, _, _, null_pred = fit_many(
-        [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps
+        [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps, bare
     )
     null_res = [[e.y - p for e, p in zip(ns, pr)] for ns, pr in zip(null_sets, null_pred)]
     null_gaps = [_nrmse_rows(r[n_cal_exp:], ns[n_cal_exp:]) for r, ns in zip(null_res, null_sets)]
@@ -715,7 +626,6 @@ def search(
                 exps[0].arrays.keys(),
                 batch=max(len(t) for t in all_templates.values()),
             )
-        fit = dict(layout=layout)
         for s in open_specs:
             templates = all_templates[s.name]
             if not templates:
@@ -726,7 +636,7 @@ def search(
             say(f"round {rnd}: {s.name} from {len(starts)} starting point(s)")
             slot = len(starts[0].effects) - 1
             fitted, costs, starts_ssr, preds = fit_many(
-                starts, [slot] * len(starts), exps, n_cal_exp, scale, max_steps, **fit
+                starts, [slot] * len(starts), exps, n_cal_exp, scale, max_steps, layout
             )
             c = candidates[s.name]
             c.seconds += time.perf_counter() - t0
@@ -791,7 +701,7 @@ def search(
                 for ns, nm in zip(null_starts, null_models)
             ]
             _, _, _, pr1 = fit_many(
-                null_starts, [slot] * n_null, null_sets, n_cal_exp, scale, max_steps, **fit
+                null_starts, [slot] * n_null, null_sets, n_cal_exp, scale, max_steps, layout
             )
             gains = []
             for ns, nr, p in zip(null_sets, null_res, pr1):
@@ -852,7 +762,7 @@ def search(
         cost = np.array([ssr])
         # the current model refitted on every null record, for the next round's null
         null_models, _, _, null_pred = fit_many(
-            [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps, **fit
+            [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps, layout
         )
         null_res = [[e.y - p for e, p in zip(ns, pr)] for ns, pr in zip(null_sets, null_pred)]
         say(f"round {rnd}: accepted {chosen.effect} (validation gap {chosen.validation_gap:.4f})")
