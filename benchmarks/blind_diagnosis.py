@@ -252,6 +252,10 @@ def summarise(rows: list[dict]) -> dict:
             "median_seconds": _median(r.get("seconds") for r in rs),
             "max_seconds": max((r.get("seconds") or 0.0 for r in rs), default=None),
             "max_seconds_20k_samples_or_more": max(large) if large else None,
+            "max_cpu_seconds_20k_samples_or_more": max(
+                (r["cpu_seconds"] for r in rs if r.get("cpu_seconds") and r["samples"] >= 20000),
+                default=None,
+            ),
             "cases_20k_samples_or_more": len(large),
             "median_samples": _median(r["samples"] for r in rs),
         }
@@ -318,6 +322,8 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         f"| worst time of the {o['cases_20k_samples_or_more']} cases with ≥ 20 000 samples | "
         f"{_num(o['max_seconds_20k_samples_or_more'], '{:.1f}')} s | ≤ 60 s (25 000 samples) | "
         f"{_met(o['max_seconds_20k_samples_or_more'], TARGETS['seconds_per_25k'], True)} |",
+        f"| worst CPU time (this process) of those cases | "
+        f"{_num(o.get('max_cpu_seconds_20k_samples_or_more'), '{:.1f}')} s | | |",
         f"| diagnosis errors (exceptions) | {o['errors']} | 0 | |",
         "",
         "Per family:",
@@ -338,8 +344,8 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         "",
         "Per case (expected → found; `primary` marks the verdict's primary effect):",
         "",
-        "| case | expected | found (primary) | | shrink | gap / noise floor | time |",
-        "|---|---|---|---|---|---|---|",
+        "| case | expected | found (primary) | | shrink | gap / noise floor | time (CPU) | load |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         exp = ", ".join(r["effects"]) or "none"
@@ -360,7 +366,8 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         )
         lines.append(
             f"| {r['case']} | {exp} | {got} | {mark} | {_num(r.get('shrink'))} | {gn} "
-            f"| {_num(r.get('seconds'), '{:.1f}')} s |"
+            f"| {_num(r.get('seconds'), '{:.1f}')} s ({_num(r.get('cpu_seconds'), '{:.1f}')} s) "
+            f"| {_num(r.get('load_average'), '{:.1f}')} |"
         )
     return "\n".join(lines) + "\n"
 
