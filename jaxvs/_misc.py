@@ -14,10 +14,56 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-__all__ = ["expm", "is_traced", "json_safe", "timed_call"]
+__all__ = ["as_real", "check_finite", "concrete", "expm", "is_traced", "json_safe", "timed_call"]
 
 _CACHE: collections.OrderedDict = collections.OrderedDict()
 _CACHE_SIZE = 32
+
+
+def as_real(x: Any, what: str) -> Array:
+    """`x` as a real floating JAX array (integers promoted to the default float).
+
+    **Arguments:** `x`, anything `jnp.asarray` takes; `what`, how the error names it
+    (e.g. ``"ModalModel: omega"``).
+
+    **Raises:** `TypeError` for complex input: a parameter or signal of a machine model is
+    real; take `.real` or `abs()` explicitly if that is what was meant."""
+    x = jnp.asarray(x)
+    if jnp.iscomplexobj(x):
+        raise TypeError(
+            f"{what} must be real; got a complex array (take .real or abs() explicitly)."
+        )
+    if not jnp.issubdtype(x.dtype, jnp.floating):
+        x = x.astype(jnp.result_type(float))
+    return x
+
+
+def concrete(x: Any) -> np.ndarray | None:
+    """`x` as a NumPy array when its value is known, `None` when it is traced (under `jit`)."""
+    if isinstance(x, jax.core.Tracer):
+        return None
+    try:
+        return np.asarray(x)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return None
+
+
+def check_finite(x: Any, what: str, fix: str, *, unit: str = "value(s)") -> Any:
+    """Refuse NaN/inf in `x`, which would otherwise spread silently through the result.
+
+    Eagerly: `ValueError` "`what` has n non-finite `unit`, the first at index (i, ...).
+    `fix`". Under `jit` (traced `x`): `x` wrapped in `eqx.error_if` with "`what` contains
+    NaN or inf. `fix`". Returns `x` unchanged otherwise."""
+    value = concrete(x)
+    if value is None:
+        return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), f"{what} contains NaN or inf. {fix}")
+    bad = ~np.isfinite(value)
+    if bad.any():
+        index = tuple(int(i) for i in np.unravel_index(int(np.argmax(bad)), bad.shape))
+        raise ValueError(
+            f"{what} has {int(bad.sum())} non-finite {unit}, the first at index {index}. {fix}"
+        )
+    return x
 
 
 def is_traced(tree: Any) -> bool:

@@ -51,7 +51,7 @@ def first_order(T0=15.0, k=1.0, T1=1.0):
 def test_nonfinite_data():
     y = Y.copy()
     y[7] = np.nan
-    with pytest.raises(ValueError, match=r"non-finite value\(s\) \(first at index \(7,\)\)"):
+    with pytest.raises(ValueError, match=r"non-finite value\(s\), the first at index \(7,\)"):
         jaxvs.calibrate(first_order(), {"t": T, "y": y}, CURVE)
     with pytest.raises(ValueError, match="'y' has 1 non-finite"):
         jaxvs.calibrate(first_order(), {"u": np.ones(40), "y": y, "dt": 0.1}, SimulationError())
@@ -218,6 +218,19 @@ def test_family_errors():
         calibrate_family(guess, data, CURVE, positions=[0.0, 1.0, 2.0])
     with pytest.raises(ValueError, match="positions axis first"):
         calibrate_family(guess, {"t": T, "y": np.ones((3, 40))}, CURVE)
+
+
+def test_shared_options_are_checked_by_every_entry_point():
+    # multistart / calibrate_family take calibrate's options as **options: a misspelt
+    # option or a bad value is refused before any work, as calibrate refuses it.
+    guess = FirstOrder(jnp.full(3, 15.0), jnp.full(3, 1.0), jnp.full(3, 1.0))
+    data = [{"t": T, "y": Y}] * 3
+    with pytest.raises(TypeError, match="unknown option.*max_step.*the options are max_steps"):
+        calibrate_family(guess, data, CURVE, max_step=10)
+    with pytest.raises(ValueError, match="calibrate_family: max_steps must be a positive int"):
+        calibrate_family(guess, data, CURVE, max_steps=0)
+    with pytest.raises(ValueError, match="multistart: confidence must lie in"):
+        jaxvs.calibration.multistart(guess, {"t": T, "y": Y}, CURVE, confidence=1.5)
 
 
 # ----------------------------------------------------------------------------- parametrisations

@@ -102,7 +102,7 @@ def test_bad_input():
         cwt_morlet(x, DT, [600.0])
     with pytest.raises(ValueError, match="Nyquist"):
         cwt_damping(x, DT, (400.0, 700.0))
-    with pytest.raises(TypeError, match="real signal"):
+    with pytest.raises(TypeError, match="x must be real"):
         cwt_morlet(x + 0j, DT, [50.0])
     with pytest.raises(ValueError, match="too short"):
         cwt_damping(x[:120], DT, (5.0, 15.0), omega0=20.0)

@@ -3,6 +3,7 @@ families and sharding, one Levenberg-Marquardt, the rational and modal fitters a
 linear initialisers (Levy, Sanathanan-Koerner, pLSCF)."""
 
 from ._calibrate import (
+    CalibrateOptions as CalibrateOptions,
     CalibrationError as CalibrationError,
     CalibrationResult as CalibrationResult,
     calibrate as calibrate,

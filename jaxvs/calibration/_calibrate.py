@@ -13,8 +13,9 @@ Jacobian at the estimate gives `σ̂² (JᵀJ)⁻¹`, mapped to the physical par
 delta method.
 """
 
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, TypedDict
 
 import equinox as eqx
 import jax
@@ -30,7 +31,7 @@ from ._residuals import AbstractResidual, Joint
 from ._results import RESULTS, describe, failure_message
 from ._solvers import make_solver
 
-__all__ = ["CalibrationResult", "calibrate", "free_spec"]
+__all__ = ["CalibrateOptions", "CalibrationResult", "SolveOptions", "calibrate", "free_spec"]
 
 
 class CalibrationResult(eqx.Module):
@@ -450,6 +451,49 @@ def _failure_message(out: CalibrationResult) -> str | None:
     return msg
 
 
+class CalibrateOptions(TypedDict, total=False):
+    """The keyword options every calibration entry point shares with [`calibrate`][]
+    (`multistart`, `calibrate_family`, `calibrate_family_sharded` take them as `**options`):
+    `max_steps`, `rtol`, `atol`, `throw`, `covariance`, `confidence`."""
+
+    max_steps: int
+    rtol: float | None
+    atol: float | None
+    throw: bool
+    covariance: bool
+    confidence: float
+
+
+@dataclass(frozen=True)
+class SolveOptions:
+    """[`CalibrateOptions`][] resolved and checked: defaults filled in, bad values refused.
+
+    Built by `SolveOptions.of(where, options)`, which also refuses unknown keywords (a
+    misspelt option is an error, never silently ignored)."""
+
+    max_steps: int = 256
+    rtol: float | None = None
+    atol: float | None = None
+    throw: bool = True
+    covariance: bool = True
+    confidence: float = 0.95
+
+    @classmethod
+    def of(cls, where: str, options: Mapping[str, Any]) -> "SolveOptions":
+        unknown = sorted(set(options) - set(CalibrateOptions.__annotations__))
+        if unknown:
+            raise TypeError(
+                f"{where}: unknown option(s) {', '.join(unknown)}; the options are "
+                f"{', '.join(CalibrateOptions.__annotations__)}."
+            )
+        out = cls(**options)
+        if not isinstance(out.max_steps, int) or out.max_steps < 1:
+            raise ValueError(f"{where}: max_steps must be a positive int; got {out.max_steps!r}.")
+        if not 0 < out.confidence < 1:
+            raise ValueError(f"{where}: confidence must lie in (0, 1); got {out.confidence}.")
+        return out
+
+
 class CalibrationError(RuntimeError):
     """A calibration failed and `throw=True` (the message says why and what to do)."""
 
@@ -524,10 +568,9 @@ def calibrate(
     """
     residual, data = _normalise(residual, data, weights)
     solver = make_solver(solver, rtol, atol)
-    if not isinstance(max_steps, int) or max_steps < 1:
-        raise ValueError(f"calibrate: max_steps must be a positive int; got {max_steps!r}.")
-    if not 0 < confidence < 1:
-        raise ValueError(f"calibrate: confidence must lie in (0, 1); got {confidence}.")
+    SolveOptions.of(
+        "calibrate", dict(max_steps=max_steps, rtol=rtol, atol=atol, confidence=confidence)
+    )
     prepared = residual.prepare(data)
     spec = free_spec(model, free)
     args = (model, prepared, residual, solver, spec, max_steps, covariance, confidence)

@@ -8,7 +8,7 @@
 """
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Unpack
 
 import equinox as eqx
 import jax
@@ -20,8 +20,10 @@ from .._misc import is_traced, timed_call
 from ..data import FRFData
 from ..models import AbstractFamilyLaw
 from ._calibrate import (
+    CalibrateOptions,
     CalibrationError,
     CalibrationResult,
+    SolveOptions,
     _failure_message,
     _impl,
     _normalise,
@@ -121,12 +123,7 @@ def multistart(
     *,
     free: Any = None,
     weights: Any = None,
-    max_steps: int = 256,
-    rtol: float | None = None,
-    atol: float | None = None,
-    throw: bool = True,
-    covariance: bool = True,
-    confidence: float = 0.95,
+    **options: Unpack[CalibrateOptions],
 ) -> MultistartResult:
     """Calibrate from several initial guesses in one vectorised call; keep the best.
 
@@ -147,8 +144,9 @@ def multistart(
 
     A [`MultistartResult`][] with the best result, all results and the best index.
     """
+    o = SolveOptions.of("multistart", options)
     residual, data = _normalise(residual, data, weights)
-    solver = make_solver(solver, rtol, atol)
+    solver = make_solver(solver, o.rtol, o.atol)
     if isinstance(models, list):
         if not models:
             raise ValueError("multistart: give at least one initial model.")
@@ -177,14 +175,14 @@ def multistart(
         residual,
         solver,
         spec,
-        max_steps,
-        covariance,
-        confidence,
+        o.max_steps,
+        o.covariance,
+        o.confidence,
     )
     out = eqx.tree_at(lambda o: o.starts, out, _with_times(out.starts, times))
     out = eqx.tree_at(lambda o: o.best, out, _with_times(out.best, times))
     ok = out.starts.result == RESULTS.successful
-    if throw:
+    if o.throw:
         if times is None:
             out = _first_failure(out.starts.result).error_if(out, ~jnp.any(ok))
         elif not bool(np.any(np.asarray(ok))):
@@ -303,12 +301,7 @@ def calibrate_family(
     positions: Any = None,
     shared: Any = None,
     free: Any = None,
-    max_steps: int = 256,
-    rtol: float | None = None,
-    atol: float | None = None,
-    throw: bool = True,
-    covariance: bool = True,
-    confidence: float = 0.95,
+    **options: Unpack[CalibrateOptions],
 ) -> CalibrationResult:
     """Calibrate a family of models, one per position (of another axis), in one call.
 
@@ -343,13 +336,12 @@ def calibrate_family(
 
     A batched (form 1) or joint (forms 2-3) [`CalibrationResult`][].
     """
+    o = SolveOptions.of("calibrate_family", options)
     if not isinstance(residual, AbstractResidual):
         raise TypeError(
             "calibrate_family: `residual` is the residual of one position (e.g. "
             f"FrequencyError()); got {type(residual).__name__}."
         )
-    kwargs = dict(max_steps=max_steps, rtol=rtol, atol=atol, throw=throw)
-    kwargs |= dict(covariance=covariance, confidence=confidence)
     if positions is not None:
         if not isinstance(model, AbstractFamilyLaw):
             raise TypeError(
@@ -369,7 +361,7 @@ def calibrate_family(
                 f"calibrate_family: {positions.shape[0]} positions but "
                 f"{_n_positions(prepared)} experiments; give one experiment per position."
             )
-        return calibrate(model, prepared, _Prepared(fam), solver, free=free, **kwargs)
+        return calibrate(model, prepared, _Prepared(fam), solver, free=free, **options)
     if shared is not None:
         spec = free_spec(model, shared)
         axes = jax.tree_util.tree_map(
@@ -386,18 +378,26 @@ def calibrate_family(
         fam = _FamilyResidual(residual, None, axes)
         prepared = fam.prepare(data)
         _check_batched(model, axes, _n_positions(prepared))
-        return calibrate(model, prepared, _Prepared(fam), solver, free=free, **kwargs)
+        return calibrate(model, prepared, _Prepared(fam), solver, free=free, **options)
 
-    solver = make_solver(solver, rtol, atol)
+    solver = make_solver(solver, o.rtol, o.atol)
     prepared = _prepare_family(residual, data)
     n = _n_positions(prepared)
     _check_batched(model, jax.tree_util.tree_map(lambda _: 0, model, is_leaf=is_parameter), n)
     spec = free_spec(model, free)
     out, times = _run_batched(
-        _family_impl, model, prepared, residual, solver, spec, max_steps, covariance, confidence
+        _family_impl,
+        model,
+        prepared,
+        residual,
+        solver,
+        spec,
+        o.max_steps,
+        o.covariance,
+        o.confidence,
     )
     out = _with_times(out, times)
-    if throw:
+    if o.throw:
         failed = out.result != RESULTS.successful
         if times is None:
             out = _first_failure(out.result).error_if(out, jnp.any(failed))

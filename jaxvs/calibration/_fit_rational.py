@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from .._misc import concrete
 from ..models import RationalTF
 from . import _lm, _sk
 from ._lm import batched_while
@@ -127,16 +128,6 @@ def _as_order(order) -> tuple[int, int]:
             "denominator order); jaxvs models are proper. Use nb <= na (a TMF has nb == na)."
         )
     return nb, na
-
-
-def _concrete(x) -> np.ndarray | None:
-    """The value of `x` as a NumPy array, or `None` when `x` is traced (under `jit`)."""
-    if isinstance(x, jax.core.Tracer):
-        return None
-    try:
-        return np.asarray(x)
-    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
-        return None
 
 
 def _check_finite(x, value: np.ndarray | None, what: str, fix: str):
@@ -347,7 +338,7 @@ def _chunked(fn, *args):
 def _real_imag(H, size: int, n_freq: int) -> tuple[Array, Array]:
     """Real and imaginary parts as float64 `(size, freq)` arrays (NumPy when concrete:
     splitting a complex array is a strided copy that NumPy does much faster than XLA:CPU)."""
-    value = _concrete(H)
+    value = concrete(H)
     if value is not None:
         value = value.reshape(size, n_freq).astype(np.complex128, copy=False)
         return jnp.asarray(np.ascontiguousarray(value.real)), jnp.asarray(
@@ -459,7 +450,7 @@ def fit_rational(
         )
     # Concrete inputs are checked and split in NumPy (no device round trips); traced ones
     # (a caller's `jit`) keep their shape checks and get `eqx.error_if` for values.
-    omega_c, H_c = _concrete(omega), _concrete(H)
+    omega_c, H_c = concrete(omega), concrete(H)
     omega = jnp.asarray(omega) if omega_c is None else omega_c
     H = jnp.asarray(H) if H_c is None else H_c
     if np.iscomplexobj(omega):
@@ -500,7 +491,7 @@ def fit_rational(
     if weights is None:
         w2 = jnp.ones((n_freq,), jnp.float64)
     else:
-        w_c = _concrete(weights)
+        w_c = concrete(weights)
         w = jnp.asarray(weights) if w_c is None else w_c
         if np.iscomplexobj(w):
             raise TypeError("fit_rational: weights must be real and non-negative.")

@@ -24,6 +24,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
+from .._misc import as_real, concrete
+
 __all__ = [
     "AbstractParameter",
     "Bounded",
@@ -92,23 +94,6 @@ def unwrap(tree: PyTree) -> PyTree:
         return x
 
     return jax.tree_util.tree_map(_unwrap_node, tree, is_leaf=is_parameter)
-
-
-def _concrete(x: Any) -> np.ndarray | None:
-    """`x` as a numpy array when it is concrete, `None` under tracing."""
-    try:
-        return np.asarray(x)
-    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
-        return None
-
-
-def _as_inexact(x: ArrayLike, what: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(f"{what}: the value must be real; got a complex array.")
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
-    return x
 
 
 class Fixed(AbstractParameter):
@@ -189,14 +174,14 @@ def positive(x: ArrayLike, *, transform: Literal["log", "softplus"] = "log") -> 
     **Raises:** `ValueError` if a concrete `x` has entries <= 0 (under `jit`: an
     `eqx.error_if` runtime error).
     """
-    x = _as_inexact(x, "positive")
+    x = as_real(x, "positive")
     if transform not in ("log", "softplus"):
         raise ValueError(f"positive: transform must be 'log' or 'softplus'; got {transform!r}.")
     msg = (
         "positive: the initial value must be > 0 to be reparametrised; start from a "
         "small positive guess instead of 0 or a negative value."
     )
-    xc = _concrete(x)
+    xc = concrete(x)
     if xc is not None and not np.all(xc > 0):
         raise ValueError(msg + f" Got {xc}.")
     x = eqx.error_if(x, ~(x > 0), msg)
@@ -220,10 +205,10 @@ def bounded(x: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> Bounded:
     **Raises:** `ValueError` if a concrete `x` is not strictly inside the bounds or
     `lo >= hi`.
     """
-    x = _as_inexact(x, "bounded")
+    x = as_real(x, "bounded")
     lo = jnp.broadcast_to(jnp.asarray(lo, x.dtype), x.shape)
     hi = jnp.broadcast_to(jnp.asarray(hi, x.dtype), x.shape)
-    xc, loc, hic = _concrete(x), _concrete(lo), _concrete(hi)
+    xc, loc, hic = concrete(x), concrete(lo), concrete(hi)
     if loc is not None and hic is not None and not np.all(loc < hi):
         raise ValueError(f"bounded: need lo < hi; got lo={loc}, hi={hic}.")
     msg = (
@@ -320,7 +305,7 @@ def stable_denominator(den: ArrayLike) -> StableDenominator:
     to the left half-plane first, as `fit_rational` does, or start from a stable guess)
     or lies at 0; `TypeError` under tracing.
     """
-    den_c = _concrete(den)
+    den_c = concrete(den)
     if den_c is None:
         raise TypeError(
             "stable_denominator needs a concrete denominator (it finds the roots with "
@@ -353,7 +338,7 @@ def stable_denominator(den: ArrayLike) -> StableDenominator:
             )
         omegas, zetas, reals = _sections_from_poles(poles)
         lw[idx], lz[idx], lp[idx], lead[idx] = np.log(omegas), np.log(zetas), np.log(reals), d[0]
-    dtype = _as_inexact(den, "stable_denominator").dtype
+    dtype = as_real(den, "stable_denominator").dtype
     return StableDenominator(*(jnp.asarray(a, dtype) for a in (lw, lz, lp, lead)))
 
 

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, PyTree
 
-from .._misc import expm
+from .._misc import as_real, check_finite, concrete, expm
 from ..data import Record
 from ..models import AbstractLinearModel, AbstractModel, frequency_response, map_batch, simulate
 
@@ -52,35 +52,12 @@ class ExcitationWarning(UserWarning):
 # ----------------------------------------------------------------------------- helpers
 
 
-def _concrete(x: Any) -> np.ndarray | None:
-    """`x` as numpy when concrete, `None` when traced."""
-    if isinstance(x, jax.core.Tracer):
-        return None
-    try:
-        return np.asarray(x)
-    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
-        return None
-
-
 def _check_finite(x: Array, name: str, where: str) -> Array:
-    """Raise on NaN/inf: eagerly with the first bad index, or `eqx.error_if` when traced."""
-    xc = _concrete(x)
-    advice = (
+    fix = (
         "Remove or interpolate the bad samples (e.g. Record.slice / np.interp), or select "
         "a clean frequency band (FRFData.select)."
     )
-    if xc is not None:
-        bad = ~np.isfinite(xc)
-        if bad.any():
-            idx = np.unravel_index(int(np.argmax(bad)), xc.shape)
-            raise ValueError(
-                f"{where}: data {name!r} has {int(bad.sum())} non-finite value(s) "
-                f"(first at index {tuple(int(i) for i in idx)}). {advice}"
-            )
-        return x
-    return eqx.error_if(
-        x, ~jnp.all(jnp.isfinite(x)), f"{where}: data {name!r} has NaN or inf. {advice}"
-    )
+    return check_finite(x, f"{where}: data {name!r}", fix)
 
 
 def _contains(data: Any, name: str) -> bool:
@@ -118,12 +95,7 @@ def _lookup(data: Any, name: str, where: str) -> Any:
 
 
 def _as_float_array(x: Any, name: str, where: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(f"{where}: signal {name!r} must be real; got a complex array.")
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
-    return x
+    return as_real(x, f"{where}: signal {name!r}")
 
 
 def _signals(data: Any, names: str | tuple[str, ...], where: str) -> Array:
@@ -140,7 +112,7 @@ def _sample_time(data: Any, where: str) -> Any:
         dt = _lookup(data, "dt", where)
     elif _has(data, "t"):
         t = _lookup(data, "t", where)
-        tc = _concrete(t)
+        tc = concrete(t)
         if tc is None:
             raise ValueError(
                 f"{where}: under jit/vmap give the sample time as data['dt'], not only 't'."
@@ -157,7 +129,7 @@ def _sample_time(data: Any, where: str) -> Any:
             )
     else:
         raise ValueError(f"{where}: the data need a sample time 'dt' [s] (or a time vector 't').")
-    dtc = _concrete(dt)
+    dtc = concrete(dt)
     if dtc is not None:
         if dtc.shape != () or not np.isfinite(dtc) or dtc <= 0:
             raise ValueError(
@@ -168,7 +140,7 @@ def _sample_time(data: Any, where: str) -> Any:
 
 
 def _warn_if_constant(u: Array, names: str | tuple[str, ...], where: str) -> None:
-    uc = _concrete(u)
+    uc = concrete(u)
     if uc is None or uc.size == 0:
         return
     span = np.atleast_1d(np.ptp(uc, axis=0))
@@ -531,7 +503,7 @@ class FrequencyError(AbstractResidual):
         w = jnp.ones(H.shape, omega.dtype)
         if self.weighting is not None:
             mag = jnp.abs(H)
-            magc = _concrete(mag)
+            magc = concrete(mag)
             if magc is not None and np.any(magc == 0):
                 raise ValueError(
                     f"{where}: weighting={self.weighting!r} divides by |H|, which is 0 at "

@@ -21,7 +21,7 @@ import functools
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, Unpack
 
 import equinox as eqx
 import jax
@@ -32,7 +32,14 @@ from jaxtyping import Array, ArrayLike, PyTree
 
 from .._progress import Progress
 from ..models import AbstractLinearModel, simulate
-from ._calibrate import CalibrationError, CalibrationResult, _failure_message, free_spec
+from ._calibrate import (
+    CalibrateOptions,
+    CalibrationError,
+    CalibrationResult,
+    SolveOptions,
+    _failure_message,
+    free_spec,
+)
 from ._family import _check_batched, _family_impl, _index, _n_positions, _prepare_family
 from ._parametrise import is_parameter
 from ._residuals import AbstractResidual
@@ -391,12 +398,7 @@ def calibrate_family_sharded(
     *,
     mesh: Mesh,
     free: Any = None,
-    max_steps: int = 256,
-    rtol: float | None = None,
-    atol: float | None = None,
-    throw: bool = True,
-    covariance: bool = True,
-    confidence: float = 0.95,
+    **options: Unpack[CalibrateOptions],
 ) -> CalibrationResult:
     """[`calibrate_family`][jaxvs.calibration.calibrate_family] (independent members) over `mesh`.
 
@@ -430,13 +432,14 @@ def calibrate_family_sharded(
     `ValueError` when the mesh does not divide the family; `CalibrationError` when a
     member fails and `throw=True`.
     """
+    o = SolveOptions.of("calibrate_family_sharded", options)
     axis = _axis(mesh)
     if not isinstance(residual, AbstractResidual):
         raise TypeError(
             "calibrate_family_sharded: `residual` is the residual of one member (e.g. "
             f"FrequencyError()); got {type(residual).__name__}."
         )
-    solver = make_solver(solver, rtol, atol)
+    solver = make_solver(solver, o.rtol, o.atol)
     prepared = _prepare_family(residual, data)
     n = _n_positions(prepared)
     _check_batched(model, jax.tree_util.tree_map(lambda _: 0, model, is_leaf=is_parameter), n)
@@ -456,9 +459,9 @@ def calibrate_family_sharded(
         residual,
         solver,
         spec,
-        max_steps,
-        covariance,
-        confidence,
+        o.max_steps,
+        o.covariance,
+        o.confidence,
         mesh=mesh,
     )
     shape = out.stats["compile_time"].shape
@@ -467,7 +470,7 @@ def calibrate_family_sharded(
         out,
         (jnp.full(shape, t_compile), jnp.full(shape, t_run)),
     )
-    if throw:
+    if o.throw:
         failed = _gather(out.result._value) != _gather(RESULTS.successful._value)
         if np.any(failed):
             bad = np.flatnonzero(failed)

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from .._misc import is_traced
+from .._misc import check_finite, is_traced
 
 # What an FRF relates (Ewins, *Modal Testing*, 2000, ch. 1): response per force as
 # displacement (receptance), velocity (mobility) or acceleration (accelerance); a response
@@ -333,21 +333,11 @@ def _check_grid(frequency: Array) -> Array:
 
 
 def _check_finite(x: Array, name: str) -> Array:
-    if is_traced(x):
-        return eqx.error_if(
-            x,
-            ~jnp.all(jnp.isfinite(x)),
-            f"FRFData: {name} contains NaN or inf (an estimate divided by a zero spectrum?).",
-        )
-    bad = ~np.isfinite(np.asarray(x))
-    if bad.any():
-        index = np.unravel_index(int(np.argmax(bad)), bad.shape)
-        raise ValueError(
-            f"FRFData: {name} has {int(bad.sum())} non-finite value(s), the first at index "
-            f"{tuple(int(i) for i in index)}. Remove those frequencies (e.g. a DC bin where the "
-            "input has no power) before building the FRFData."
-        )
-    return x
+    fix = (
+        "Remove those frequencies (e.g. a DC bin where the input has no power, which makes an "
+        "estimate divide by a zero spectrum) before building the FRFData."
+    )
+    return check_finite(x, f"FRFData: {name}", fix)
 
 
 def _check_coherence_range(c: Array) -> Array:

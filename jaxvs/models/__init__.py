@@ -84,6 +84,7 @@ from .lti import (
     zeros as zeros,
 )
 from .thermal import (
+    AbstractNetwork as AbstractNetwork,
     BiasFreeRegression as BiasFreeRegression,
     DrivenFirstOrder as DrivenFirstOrder,
     FirstOrder as FirstOrder,

@@ -32,6 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
+from .._misc import as_real
+
 __all__ = ["CWTDamping", "cwt_damping", "cwt_morlet", "cwt_ridge", "morlet_scales"]
 
 DEFAULT_OMEGA0 = 6.0
@@ -54,11 +56,7 @@ def _check_omega0(omega0: float, where: str) -> float:
 
 
 def _as_record(x: ArrayLike, where: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(f"{where}: x must be a real signal; got complex.")
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
+    x = as_real(x, f"{where}: x")
     if x.ndim < 1 or x.shape[-1] < 8:
         raise ValueError(
             f"{where}: x must be (*batch, time) with at least 8 samples; got shape {x.shape}."
@@ -171,8 +169,7 @@ def cwt_ridge(
     f = jnp.asarray(frequencies)
     if W.ndim != 2 or W.shape[0] != f.shape[0]:
         raise ValueError(
-            f"cwt_ridge: coefficients must be (freq, time) with freq = {f.shape[0]}; got "
-            f"{W.shape}."
+            f"cwt_ridge: coefficients must be (freq, time) with freq = {f.shape[0]}; got {W.shape}."
         )
     tiny = jnp.finfo(jnp.abs(W).dtype).tiny
     logm = jnp.log(jnp.abs(W) + tiny)
@@ -290,7 +287,6 @@ def cwt_damping(
             "min_amplitude."
         )
     return out
-
 
 
 @functools.partial(jax.jit, static_argnums=(2, 3, 4))

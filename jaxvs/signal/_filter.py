@@ -19,12 +19,13 @@ states in forward-backward filtering", *IEEE Trans. Signal Process.* 44(4), 1996
 import math
 import operator
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, ArrayLike, Float
+
+from .._misc import check_finite
 
 # ---------------------------------------------------------------------------------------
 # Validation helpers (shared with _differentiate.py)
@@ -60,21 +61,11 @@ def _check_axis(axis, ndim: int, fn: str) -> int:
 
 def _check_finite(x: Array, fn: str) -> Array:
     """NaN/inf would silently spread over the whole record through the IIR recursion."""
-    if isinstance(x, jax.core.Tracer):
-        return eqx.error_if(
-            x,
-            ~jnp.all(jnp.isfinite(x)),
-            f"{fn}: x contains NaN or inf samples; remove or interpolate them first.",
-        )
-    bad = ~np.isfinite(np.asarray(x))
-    if bad.any():
-        index = np.unravel_index(int(np.argmax(bad)), bad.shape)
-        raise ValueError(
-            f"{fn}: x has {int(bad.sum())} non-finite sample(s), the first at index "
-            f"{tuple(int(i) for i in index)}. Remove or interpolate them (e.g. with "
-            "jaxvs.signal.resample on the valid samples) before filtering."
-        )
-    return x
+    fix = (
+        "Remove or interpolate them (e.g. with jaxvs.signal.resample on the valid samples) "
+        "before filtering."
+    )
+    return check_finite(x, f"{fn}: x", fix, unit="sample(s)")
 
 
 def _positive_float(value, name: str, fn: str) -> float:

@@ -22,7 +22,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from .._custom_types import RealScalarLike
-from .._misc import is_traced
+from .._misc import check_finite, is_traced
 from ..data import FRFData
 from ._windows import _ALIASES, _check_fs, get_window
 
@@ -92,19 +92,8 @@ def _as_signal(x, name: str, fn: str) -> Array:
 
 
 def _check_finite(x: Array, name: str, fn: str) -> Array:
-    if is_traced(x):
-        return eqx.error_if(
-            x, ~jnp.all(jnp.isfinite(x)), f"{fn}: {name} contains NaN or inf samples."
-        )
-    bad = ~np.isfinite(np.asarray(x))
-    if bad.any():
-        index = np.unravel_index(int(np.argmax(bad)), bad.shape)
-        raise ValueError(
-            f"{fn}: {name} has {int(bad.sum())} non-finite sample(s), the first at index "
-            f"{tuple(int(i) for i in index)}. Remove or interpolate them (or cut the record "
-            "before the gap) before estimating spectra."
-        )
-    return x
+    fix = "Remove or interpolate them (or cut the record before the gap) before estimating spectra."
+    return check_finite(x, f"{fn}: {name}", fix, unit="sample(s)")
 
 
 def _check_exciting(x: Array, name: str, role: str, records_axis: int | None, fn: str) -> Array:

@@ -23,19 +23,11 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._misc import as_real
 from ..lti import NormalModes, normal_modes
 from ._friction import AbstractFriction, NoFriction, dead_zone
 
 __all__ = ["AbstractMechanics", "BallScrew", "FlexibleAxis", "RigidAxis"]
-
-
-def _param(x: ArrayLike, name: str, where: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(f"{where}: {name} must be real; got a complex value.")
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
-    return x
 
 
 def _friction(f, where: str) -> AbstractFriction:
@@ -94,7 +86,7 @@ class RigidAxis(AbstractMechanics):
     friction: AbstractFriction
 
     def __init__(self, mass: ArrayLike, friction: AbstractFriction | None = None):
-        m = _param(mass, "mass", "RigidAxis")
+        m = as_real(mass, "RigidAxis: mass")
         self.mass = eqx.error_if(m, ~(m > 0), "RigidAxis: mass must be > 0 kg.")
         self.friction = _friction(friction, "RigidAxis")
 
@@ -155,9 +147,9 @@ class FlexibleAxis(AbstractMechanics):
         backlash_smoothness: float = 0.0,
     ):
         where = "FlexibleAxis"
-        m = _param(masses, "masses", where)
-        k = _param(stiffnesses, "stiffnesses", where)
-        c = _param(dampings, "dampings", where)
+        m = as_real(masses, f"{where}: masses")
+        k = as_real(stiffnesses, f"{where}: stiffnesses")
+        c = as_real(dampings, f"{where}: dampings")
         if m.ndim != 1 or m.shape[0] < 2:
             raise ValueError(
                 f"{where}: masses must be 1-D with >= 2 entries (motor ... table); got shape "
@@ -171,15 +163,14 @@ class FlexibleAxis(AbstractMechanics):
             )
         if not -(n - 1) <= backlash_spring < n - 1:
             raise ValueError(
-                f"{where}: backlash_spring={backlash_spring} is not a spring index "
-                f"(0..{n - 2})."
+                f"{where}: backlash_spring={backlash_spring} is not a spring index (0..{n - 2})."
             )
         self.masses = eqx.error_if(m, ~jnp.all(m > 0), f"{where}: masses must be > 0 kg.")
         self.stiffnesses = eqx.error_if(
             k, ~jnp.all(k > 0), f"{where}: stiffnesses must be > 0 N/m."
         )
         self.dampings = eqx.error_if(c, ~jnp.all(c >= 0), f"{where}: dampings must be >= 0.")
-        b = _param(backlash, "backlash", where)
+        b = as_real(backlash, f"{where}: backlash")
         self.backlash = eqx.error_if(b, ~(b >= 0), f"{where}: backlash must be >= 0 m.")
         self.friction = _friction(friction, where)
         self.motor_friction = _friction(motor_friction, where)
@@ -272,7 +263,7 @@ class BallScrew(eqx.Module):
             "shear_modulus": shear_modulus,
         }
         for name, val in vals.items():
-            x = _param(val, name, where)
+            x = as_real(val, f"{where}: {name}")
             x = eqx.error_if(x, ~(x > 0), f"{where}: {name} must be > 0.")
             setattr(self, name, x)
 
@@ -394,4 +385,3 @@ class BallScrew(eqx.Module):
             motor_friction=motor_friction,
             backlash=backlash,
         )
-

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..._misc import is_traced
+from ..._misc import as_real, is_traced
 from .._base import AbstractModel
 from .._nonlinear_simulate import (
     check_step,
@@ -63,11 +63,7 @@ __all__ = [
 
 
 def _param(x: ArrayLike, name: str, where: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(f"{where}: {name} must be real; got a complex value.")
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
+    x = as_real(x, f"{where}: {name}")
     if x.ndim != 0:
         raise ValueError(
             f"{where}: {name} must be a scalar; got shape {x.shape}. Build families with "

@@ -25,6 +25,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._misc import as_real
+
 __all__ = [
     "AbstractFriction",
     "AsymmetricFriction",
@@ -43,15 +45,6 @@ __all__ = [
 # heuristic: 0.1 mm/s. Well below the feed speeds of a machine-tool axis (mm/s to m/s) and
 # above its encoder's velocity resolution at 1 kHz (µm/ms = 1 mm/s ... 0.1 mm/s).
 DEFAULT_VELOCITY_SCALE = 1e-4
-
-
-def _scalar_param(x: ArrayLike, name: str, where: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(f"{where}: {name} must be real; got a complex value.")
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
-    return x
 
 
 def _check_scale(velocity_scale: float, where: str) -> float:
@@ -116,7 +109,7 @@ class ViscousFriction(AbstractFriction):
     Fv: Float[Array, ""]
 
     def __init__(self, Fv: ArrayLike):
-        self.Fv = _scalar_param(Fv, "Fv", "ViscousFriction")
+        self.Fv = as_real(Fv, "ViscousFriction: Fv")
 
     def __call__(self, velocity):
         return self.Fv * jnp.asarray(velocity)
@@ -135,7 +128,7 @@ class CoulombFriction(AbstractFriction):
     velocity_scale: float = eqx.field(static=True)
 
     def __init__(self, Fc: ArrayLike, *, velocity_scale: float = DEFAULT_VELOCITY_SCALE):
-        self.Fc = _scalar_param(Fc, "Fc", "CoulombFriction")
+        self.Fc = as_real(Fc, "CoulombFriction: Fc")
         self.velocity_scale = _check_scale(velocity_scale, "CoulombFriction")
 
     def __call__(self, velocity):
@@ -172,9 +165,9 @@ class CoulombViscousFriction(AbstractFriction):
         velocity_scale: float = DEFAULT_VELOCITY_SCALE,
     ):
         where = "CoulombViscousFriction"
-        self.Fc = _scalar_param(Fc, "Fc", where)
-        self.Fv = _scalar_param(Fv, "Fv", where)
-        self.offset = _scalar_param(offset, "offset", where)
+        self.Fc = as_real(Fc, f"{where}: Fc")
+        self.Fv = as_real(Fv, f"{where}: Fv")
+        self.offset = as_real(offset, f"{where}: offset")
         self.velocity_scale = _check_scale(velocity_scale, where)
 
     def __call__(self, velocity):
@@ -219,12 +212,12 @@ class StribeckFriction(AbstractFriction):
         velocity_scale: float = DEFAULT_VELOCITY_SCALE / 10,
     ):
         where = "StribeckFriction"
-        self.Fc = _scalar_param(Fc, "Fc", where)
-        self.Fs = _scalar_param(Fs, "Fs", where)
+        self.Fc = as_real(Fc, f"{where}: Fc")
+        self.Fs = as_real(Fs, f"{where}: Fs")
         self.vs = eqx.error_if(
-            _scalar_param(vs, "vs", where), ~(jnp.asarray(vs) > 0), f"{where}: vs must be > 0."
+            as_real(vs, f"{where}: vs"), ~(jnp.asarray(vs) > 0), f"{where}: vs must be > 0."
         )
-        self.Fv = _scalar_param(Fv, "Fv", where)
+        self.Fv = as_real(Fv, f"{where}: Fv")
         if not float(shape) > 0:
             raise ValueError(f"{where}: shape must be > 0 (1 or 2 usually); got {shape}.")
         self.shape = float(shape)
@@ -267,10 +260,10 @@ class AsymmetricFriction(AbstractFriction):
         velocity_scale: float = DEFAULT_VELOCITY_SCALE,
     ):
         where = "AsymmetricFriction"
-        self.Fc_pos = _scalar_param(Fc_pos, "Fc_pos", where)
-        self.Fv_pos = _scalar_param(Fv_pos, "Fv_pos", where)
-        self.Fc_neg = _scalar_param(Fc_neg, "Fc_neg", where)
-        self.Fv_neg = _scalar_param(Fv_neg, "Fv_neg", where)
+        self.Fc_pos = as_real(Fc_pos, f"{where}: Fc_pos")
+        self.Fv_pos = as_real(Fv_pos, f"{where}: Fv_pos")
+        self.Fc_neg = as_real(Fc_neg, f"{where}: Fc_neg")
+        self.Fv_neg = as_real(Fv_neg, f"{where}: Fv_neg")
         self.velocity_scale = _check_scale(velocity_scale, where)
 
     def __call__(self, velocity):

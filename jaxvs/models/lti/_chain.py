@@ -21,10 +21,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
+from ..._misc import as_real
 from .._base import check_batch, map_batch
 from ._modal import ModalModel
 from ._rational import RationalTF
-from ._statespace import StateSpace, _as_float
+from ._statespace import StateSpace
 
 _QUANTITY_POWER = {"displacement": 0, "velocity": 1, "acceleration": 2}
 
@@ -179,9 +180,9 @@ class OscillatorChain(eqx.Module):
                 f"OscillatorChain: grounded={grounded!r}; use 'left' (mass 0 tied to ground, "
                 "right end free) or 'both' (both ends tied to ground)."
             )
-        m = _as_float(masses, "masses")
-        k = _as_float(stiffnesses, "stiffnesses")
-        c = _as_float(dampings, "dampings")
+        m = as_real(masses, "masses")
+        k = as_real(stiffnesses, "stiffnesses")
+        c = as_real(dampings, "dampings")
         if m.ndim < 1 or m.shape[-1] < 1:
             raise ValueError(
                 f"OscillatorChain: masses must have shape (*batch, N) with N >= 1; got {m.shape}."
@@ -204,7 +205,7 @@ class OscillatorChain(eqx.Module):
         if ground_dampings is None:
             g = jnp.zeros_like(m)
         else:
-            g = _as_float(ground_dampings, "ground_dampings")
+            g = as_real(ground_dampings, "ground_dampings")
             if g.shape != m.shape:
                 raise ValueError(
                     "OscillatorChain: ground_dampings must have the shape of masses "
@@ -247,10 +248,10 @@ class OscillatorChain(eqx.Module):
 
         An [`OscillatorChain`][].
         """
-        m = _as_float(masses, "masses")
-        k = _as_float(stiffnesses, "stiffnesses")
-        alpha = _as_float(alpha, "alpha")
-        beta = _as_float(beta, "beta")
+        m = as_real(masses, "masses")
+        k = as_real(stiffnesses, "stiffnesses")
+        alpha = as_real(alpha, "alpha")
+        beta = as_real(beta, "beta")
         return cls(
             m,
             k,

@@ -5,9 +5,9 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float, Shaped
 
+from ..._misc import as_real
 from .._base import AbstractLinearModel, check_batch
 from ._realisation import ModalRealisation
-from ._statespace import _as_float
 
 
 class ModalModel(AbstractLinearModel):
@@ -46,7 +46,7 @@ class ModalModel(AbstractLinearModel):
         *,
         feedthrough: ArrayLike | None = None,
     ):
-        omega_n, zeta = _as_float(omega_n, "omega_n"), _as_float(zeta, "zeta")
+        omega_n, zeta = as_real(omega_n, "omega_n"), as_real(zeta, "zeta")
         residues = jnp.asarray(residues)
         if not (jnp.issubdtype(residues.dtype, jnp.inexact)):
             residues = residues.astype(jnp.result_type(float))
@@ -66,7 +66,7 @@ class ModalModel(AbstractLinearModel):
             )
         if feedthrough is None:
             feedthrough = jnp.zeros(batch + io, omega_n.dtype)
-        feedthrough = _as_float(feedthrough, "feedthrough")
+        feedthrough = as_real(feedthrough, "feedthrough")
         if feedthrough.shape != batch + io:
             feedthrough = jnp.broadcast_to(feedthrough, batch + io)
         check_batch([batch, zeta.shape[:-1], lead[:-1]], "ModalModel")

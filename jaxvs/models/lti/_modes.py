@@ -18,17 +18,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._misc import as_real
 from ._chain import NormalModes
 
 __all__ = ["DampedModes", "damped_modes", "normal_modes"]
 
 
 def _square(x: ArrayLike, name: str, where: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(f"{where}: {name} must be real; got complex.")
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
+    x = as_real(x, f"{where}: {name}")
     if x.ndim != 2 or x.shape[0] != x.shape[1]:
         raise ValueError(
             f"{where}: {name} must be a square matrix (dof, dof); got shape {x.shape}. vmap "
@@ -164,8 +161,9 @@ def damped_modes(
     C = np.asarray(_square(damping, "damping", where))
     n = K.shape[0]
     if M.shape != (n, n) or C.shape != (n, n):
-        raise ValueError(f"{where}: K, M, C must have the same shape; got {K.shape}, "
-                         f"{M.shape}, {C.shape}.")
+        raise ValueError(
+            f"{where}: K, M, C must have the same shape; got {K.shape}, {M.shape}, {C.shape}."
+        )
     Minv = np.linalg.inv(M)
     A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ K, -Minv @ C]])
     lam = np.linalg.eigvals(A)

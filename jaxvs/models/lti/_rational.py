@@ -4,9 +4,9 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
+from ..._misc import as_real
 from .._base import AbstractLinearModel, check_batch
 from ._realisation import ModalRealisation, from_poles
-from ._statespace import _as_float
 
 
 def _frequency_scale(den: Float[Array, " n1"]) -> Array:
@@ -40,7 +40,7 @@ class RationalTF(AbstractLinearModel):
     den: Float[Array, "*batch n1"]
 
     def __init__(self, num: ArrayLike, den: ArrayLike):
-        num, den = _as_float(num, "num"), _as_float(den, "den")
+        num, den = as_real(num, "num"), as_real(den, "den")
         if num.ndim < 1 or den.ndim < 1:
             raise ValueError(
                 "RationalTF: num and den are coefficient vectors (highest power first); "

@@ -5,19 +5,11 @@ from typing import TYPE_CHECKING
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
+from ..._misc import as_real
 from .._base import AbstractLinearModel, check_batch
 
 if TYPE_CHECKING:
     from ._realisation import ModalRealisation
-
-
-def _as_float(x: ArrayLike, name: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(f"{name} must be real; got a complex array.")
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
-    return x
 
 
 class StateSpace(AbstractLinearModel):
@@ -39,7 +31,7 @@ class StateSpace(AbstractLinearModel):
     D: Float[Array, "*batch output input"]
 
     def __init__(self, A: ArrayLike, B: ArrayLike, C: ArrayLike, D: ArrayLike):
-        A, B, C, D = (_as_float(x, k) for x, k in zip((A, B, C, D), "ABCD"))
+        A, B, C, D = (as_real(x, k) for x, k in zip((A, B, C, D), "ABCD"))
         for x, k in zip((A, B, C, D), "ABCD"):
             if x.ndim < 2:
                 raise ValueError(

@@ -2,6 +2,7 @@
 bias-free linear regression (eq. 2-3) and the static / time-delay networks."""
 
 from ._networks import (
+    AbstractNetwork as AbstractNetwork,
     Perceptron as Perceptron,
     StaticNetwork as StaticNetwork,
     TimeDelayNetwork as TimeDelayNetwork,

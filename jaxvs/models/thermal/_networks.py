@@ -13,6 +13,7 @@ delayed copies (TDNN). Trainers (`jaxvs.studies.train_lm`, `train_adam`) train t
 perceptron on `net.features(u)`; batching over samples is one `vmap`.
 """
 
+import abc
 import functools
 
 import equinox as eqx
@@ -24,7 +25,7 @@ from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
 from .._base import AbstractModel
 
-__all__ = ["Perceptron", "StaticNetwork", "TimeDelayNetwork"]
+__all__ = ["AbstractNetwork", "Perceptron", "StaticNetwork", "TimeDelayNetwork"]
 
 
 class Perceptron(eqx.Module):
@@ -218,7 +219,47 @@ def _normalisation(n_inputs: int, dtype, input_range, output_range):
     return u_offset, u_scale, y_offset, y_scale
 
 
-class StaticNetwork(AbstractModel):
+class AbstractNetwork(AbstractModel):
+    """A two-layer perceptron on normalised features of the inputs (the study's ANNs).
+
+    Subclasses say which features a sample sees (`features`: the inputs themselves, or
+    them and their delayed copies) and how far back that reaches (`max_delay`); the
+    normalisation, the prediction and the model interface are shared."""
+
+    perceptron: eqx.AbstractVar[Perceptron]
+    u_offset: eqx.AbstractVar[Float[Array, " input"]]
+    u_scale: eqx.AbstractVar[Float[Array, " input"]]
+    y_offset: eqx.AbstractVar[Float[Array, ""]]
+    y_scale: eqx.AbstractVar[Float[Array, ""]]
+
+    @property
+    @abc.abstractmethod
+    def max_delay(self) -> int:
+        """The longest input delay a prediction uses [samples]."""
+
+    @abc.abstractmethod
+    def features(self, u: Float[ArrayLike, "time input"]) -> Float[Array, "time feature"]:
+        """Normalised features, one row per sample."""
+
+    @property
+    def n_inputs(self) -> int:
+        return self.u_offset.shape[0]
+
+    def output(self, yn: Float[Array, "..."]) -> Float[Array, "..."]:
+        """Normalised output -> physical units."""
+        return self.y_offset + self.y_scale * yn
+
+    def __call__(self, u: Float[ArrayLike, "time input"]) -> Float[Array, " time"]:
+        """Prediction `(time,)` for inputs `u` of shape `(time, input)`."""
+        return self.output(jax.vmap(self.perceptron)(self.features(u)))
+
+    def predict(self, u: Float[ArrayLike, " time input"], dt: float) -> Float[Array, " time"]:
+        """The output for the input samples `u` (a static map of the delayed inputs; `dt`
+        only names the sampling)."""
+        return self(u)
+
+
+class StaticNetwork(AbstractNetwork):
     """Static two-layer network: `y(k) = f(u(k))` (the study's static ANN, Fig. 7(a)).
 
     **Arguments:**
@@ -251,10 +292,6 @@ class StaticNetwork(AbstractModel):
         )
 
     @property
-    def n_inputs(self) -> int:
-        return self.u_offset.shape[0]
-
-    @property
     def max_delay(self) -> int:
         return 0
 
@@ -263,21 +300,8 @@ class StaticNetwork(AbstractModel):
         u = _as_inputs(u, self.n_inputs, "StaticNetwork")
         return (u - self.u_offset) / self.u_scale
 
-    def output(self, yn: Float[Array, "..."]) -> Float[Array, "..."]:
-        """Normalised output -> physical units."""
-        return self.y_offset + self.y_scale * yn
 
-    def __call__(self, u: Float[ArrayLike, "time input"]) -> Float[Array, " time"]:
-        """Prediction `(time,)` for inputs `u` of shape `(time, input)`."""
-        return self.output(jax.vmap(self.perceptron)(self.features(u)))
-
-    def predict(self, u: Float[ArrayLike, " time input"], dt: float) -> Float[Array, " time"]:
-        """The output for the input samples `u` (a static map of the delayed inputs; `dt`
-        only names the sampling)."""
-        return self(u)
-
-
-class TimeDelayNetwork(AbstractModel):
+class TimeDelayNetwork(AbstractNetwork):
     """Time-delay network (TDNN): `y(k) = f(u(k), u(k-1), ..., u(k-d))` (study Fig. 7(b)).
 
     **Arguments:**
@@ -320,10 +344,6 @@ class TimeDelayNetwork(AbstractModel):
         )
 
     @property
-    def n_inputs(self) -> int:
-        return self.u_offset.shape[0]
-
-    @property
     def max_delay(self) -> int:
         return max(self.delays)
 
@@ -336,16 +356,3 @@ class TimeDelayNetwork(AbstractModel):
         n = un.shape[0]
         cols = [jax.lax.dynamic_slice_in_dim(padded, d - k, n, axis=0) for k in self.delays]
         return jnp.concatenate(cols, axis=1)
-
-    def output(self, yn: Float[Array, "..."]) -> Float[Array, "..."]:
-        """Normalised output -> physical units."""
-        return self.y_offset + self.y_scale * yn
-
-    def __call__(self, u: Float[ArrayLike, "time input"]) -> Float[Array, " time"]:
-        """Prediction `(time,)` for inputs `u` of shape `(time, input)`."""
-        return self.output(jax.vmap(self.perceptron)(self.features(u)))
-
-    def predict(self, u: Float[ArrayLike, " time input"], dt: float) -> Float[Array, " time"]:
-        """The output for the input samples `u` (a static map of the delayed inputs; `dt`
-        only names the sampling)."""
-        return self(u)

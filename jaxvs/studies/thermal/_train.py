@@ -174,6 +174,8 @@ def normalise_network(net: Any, u: Any, y: Any) -> Any:
 
 
 def _prepare(net, u, y, validation, normalise, where):
+    """The trainers' common arguments: the (normalised) network, the training and validation
+    features and normalised targets, and whether a validation set was given."""
     u, y = _as_xy(u, y, net.n_inputs, where)
     _warn_constant(np.asarray(u), where)
     if validation is not None:
@@ -188,7 +190,7 @@ def _prepare(net, u, y, validation, normalise, where):
     yn = (y - net.y_offset) / net.y_scale
     Xv = net.features(uv)
     yvn = (yv - net.y_offset) / net.y_scale
-    return net, X, yn, Xv, yvn
+    return net, X, yn, Xv, yvn, jnp.asarray(validation is not None)
 
 
 def _split(net):
@@ -412,15 +414,10 @@ def train_lm(
             "train_lm: need mu > 0, 0 < mu_dec < 1 < mu_inc and mu_max > mu (trainlm: 1e-3, "
             "0.1, 10, 1e10)."
         )
-    net, X, yn, Xv, yvn = _prepare(net, u, y, validation, normalise, "train_lm")
+    data = _prepare(net, u, y, validation, normalise, "train_lm")
     f = jnp.result_type(float)
     args = (
-        net,
-        X,
-        yn,
-        Xv,
-        yvn,
-        jnp.asarray(validation is not None),
+        *data,
         max_epochs,
         max_fail,
         jnp.asarray(mu, f),
@@ -509,15 +506,10 @@ def train_adam(
     """
     if not (isinstance(epochs, int) and epochs >= 1):
         raise ValueError(f"train_adam: epochs must be an int >= 1, got {epochs!r}.")
-    net, X, yn, Xv, yvn = _prepare(net, u, y, validation, normalise, "train_adam")
+    data = _prepare(net, u, y, validation, normalise, "train_adam")
     f = jnp.result_type(float)
     args = (
-        net,
-        X,
-        yn,
-        Xv,
-        yvn,
-        jnp.asarray(validation is not None),
+        *data,
         epochs,
         float(learning_rate),
         jnp.asarray(goal, f),
