@@ -129,6 +129,8 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
         "generate_seconds": t_gen,
     }
     t0 = time.perf_counter()
+    c0 = time.process_time()
+    row["load_average"] = os.getloadavg()[0]
     try:
         rep = jaxvs.diagnose(cal, val, family=case.family, seed=seed)
     except Exception as exc:  # a crash is a failed case, reported with its message
@@ -148,6 +150,7 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
         )
         return row
     seconds = time.perf_counter() - t0
+    row["cpu_seconds"] = time.process_time() - c0
     content = rep.to_json() if hasattr(rep, "to_json") else rep.content
     if isinstance(content, str):
         content = json.loads(content)
@@ -249,6 +252,10 @@ def summarise(rows: list[dict]) -> dict:
             "median_seconds": _median(r.get("seconds") for r in rs),
             "max_seconds": max((r.get("seconds") or 0.0 for r in rs), default=None),
             "max_seconds_20k_samples_or_more": max(large) if large else None,
+            "max_cpu_seconds_20k_samples_or_more": max(
+                (r["cpu_seconds"] for r in rs if r.get("cpu_seconds") and r["samples"] >= 20000),
+                default=None,
+            ),
             "cases_20k_samples_or_more": len(large),
             "median_samples": _median(r["samples"] for r in rs),
         }
@@ -315,6 +322,8 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         f"| worst time of the {o['cases_20k_samples_or_more']} cases with ≥ 20 000 samples | "
         f"{_num(o['max_seconds_20k_samples_or_more'], '{:.1f}')} s | ≤ 60 s (25 000 samples) | "
         f"{_met(o['max_seconds_20k_samples_or_more'], TARGETS['seconds_per_25k'], True)} |",
+        f"| worst CPU time (this process) of those cases | "
+        f"{_num(o.get('max_cpu_seconds_20k_samples_or_more'), '{:.1f}')} s | | |",
         f"| diagnosis errors (exceptions) | {o['errors']} | 0 | |",
         "",
         "Per family:",
@@ -335,8 +344,8 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         "",
         "Per case (expected → found; `primary` marks the verdict's primary effect):",
         "",
-        "| case | expected | found (primary) | | shrink | gap / noise floor | time |",
-        "|---|---|---|---|---|---|---|",
+        "| case | expected | found (primary) | | shrink | gap / noise floor | time (CPU) | load |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         exp = ", ".join(r["effects"]) or "none"
@@ -357,7 +366,8 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         )
         lines.append(
             f"| {r['case']} | {exp} | {got} | {mark} | {_num(r.get('shrink'))} | {gn} "
-            f"| {_num(r.get('seconds'), '{:.1f}')} s |"
+            f"| {_num(r.get('seconds'), '{:.1f}')} s ({_num(r.get('cpu_seconds'), '{:.1f}')} s) "
+            f"| {_num(r.get('load_average'), '{:.1f}')} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -406,6 +416,13 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0, help="seed of the diagnosis bootstrap")
     p.add_argument("--only", default=None, help="comma-separated case names")
     p.add_argument("--out", default=str(RESULTS))
+    p.add_argument(
+        "--chunk",
+        type=int,
+        default=0,
+        help="run the cases N at a time, each chunk in a fresh Python process (XLA's "
+        "memory mappings grow with every compilation; one long process runs out of them)",
+    )
     args = p.parse_args(argv)
     if args.jobs < 1:
         raise SystemExit("--jobs must be >= 1")
@@ -440,6 +457,8 @@ def main(argv=None) -> int:
     )
     out = pathlib.Path(args.out)
     rows: list[dict] = []
+    if args.chunk > 0:
+        return _run_chunks(chosen, args, meta, out)
     work = [(c, args.seed) for c in chosen]
     if args.jobs == 1:
         results = map(_worker, work)
@@ -450,22 +469,75 @@ def main(argv=None) -> int:
         results = pool.map(_worker, work)
     for r in results:
         rows.append(r)
-        exp = ",".join(r["effects"]) or "none"
-        got = "ERROR " + r["error"][:60] if "error" in r else (",".join(r["found"]) or "none")
-        mark = (
-            "ok"
-            if r["primary_ok"] and r["exact_set"]
-            else ("primary-ok" if r["primary_ok"] else "MISS")
-        )
-        print(
-            f"{r['case']:36s} expected={exp:40s} found={got:40s} "
-            f"primary={r.get('found_primary')} {mark} shrink={_num(r.get('shrink'))} "
-            f"{_num(r.get('seconds'), '{:.1f}')} s load {os.getloadavg()[0]:.2f}",
-            flush=True,
-        )
+        _print_row(r)
         write(rows, meta, out)
+        jax.clear_caches()
     print(write(rows, meta, out))
     return 0
+
+
+def _run_chunks(chosen, args, meta, out: pathlib.Path) -> int:
+    """Every `args.chunk` cases in a fresh interpreter (`--only`), results merged."""
+    import subprocess
+    import tempfile
+
+    rows: list[dict] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(0, len(chosen), args.chunk):
+            names = [c.name for c in chosen[k : k + args.chunk]]
+            part = pathlib.Path(tmp) / f"chunk{k}"
+            cmd = [sys.executable, __file__, "--only", ",".join(names), "--out", str(part)]
+            cmd += ["--seed", str(args.seed), "--jobs", str(args.jobs)]
+            proc = subprocess.run(cmd, capture_output=True, text=True)
+            got = {}
+            if (part / "blind_diagnosis.json").exists():
+                got = {
+                    r["case"]: r
+                    for r in json.loads((part / "blind_diagnosis.json").read_text())["cases"]
+                }
+            for c in chosen[k : k + args.chunk]:
+                r = got.get(c.name)
+                if r is None:  # the interpreter died before this case was written
+                    r = {
+                        "case": c.name,
+                        "family": c.family,
+                        "variant": c.variant,
+                        "effects": list(c.effects),
+                        "primary": c.primary,
+                        "error": f"process exited {proc.returncode}: {proc.stderr[-300:]}",
+                        "seconds": None,
+                        "found": [],
+                        "found_primary": None,
+                        "primary_ok": False,
+                        "exact_set": False,
+                        "spurious": [],
+                        "missed": sorted(c.effects),
+                        "false_positive": False,
+                        "shrink": None,
+                        "recovery": {},
+                        "samples": 0,
+                    }
+                rows.append(r)
+                _print_row(r)
+            write(rows, meta, out)
+    print(write(rows, meta, out))
+    return 0
+
+
+def _print_row(r: dict) -> None:
+    exp = ",".join(r["effects"]) or "none"
+    got = "ERROR " + r["error"][:60] if "error" in r else (",".join(r["found"]) or "none")
+    mark = (
+        "ok"
+        if r["primary_ok"] and r["exact_set"]
+        else ("primary-ok" if r["primary_ok"] else "MISS")
+    )
+    print(
+        f"{r['case']:36s} expected={exp:40s} found={got:40s} "
+        f"primary={r.get('found_primary')} {mark} shrink={_num(r.get('shrink'))} "
+        f"{_num(r.get('seconds'), '{:.1f}')} s load {os.getloadavg()[0]:.2f}",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":

@@ -365,3 +365,42 @@ def test_cli_user_errors_and_not_identifiable_exit_codes(tmp_path, capsys):
     assert rc == 3
     rep = json.loads((out / "report.json").read_text())
     assert rep["verdict"] is None and "one direction" in rep["not_identifiable"]
+
+
+def test_tmf_null_noise_is_not_above_the_nominal_residual():
+    """The tmf null's noise level is the record's: on a TMF whose lightly damped 15 Hz
+    mode rings for seconds (far longer than the 150-tap FIR regression of `noise_var`),
+    the FIR residual overstates the noise; the null must add no more than the calibrated
+    nominal model leaves. Oracle: the white noise σ added to a scipy ZOH simulation of
+    the exact TMF, which is also the nominal model here (its residual is the noise)."""
+    import scipy.signal as ss
+
+    from jaxvs.diagnosis._base import GapModel
+    from jaxvs.diagnosis._tmf import StableTMF, TMFFamily
+
+    dt, n, sigma = 1e-3, 6000, 2e-8
+    w1, w2 = 2 * math.pi * 15.0, 2 * math.pi * 160.0
+    # x_t / x_e = mode at 15 Hz (ζ = 0.004) times a mode at 160 Hz (ζ = 0.05), unit gain
+    num = [w1**2 * w2**2]
+    den = np.polymul([1.0, 2 * 0.004 * w1, w1**2], [1.0, 2 * 0.05 * w2, w2**2])
+    rng = np.random.default_rng(1)
+    xe = np.cumsum(rng.normal(size=n)) * 1e-7
+    xe -= xe[0]
+    ad, bd, cd, dd, _ = ss.cont2discrete(ss.tf2ss(num, den), dt, method="zoh")
+    clean = ss.dlsim((ad, bd, cd, dd, dt), xe)[1][:, 0]
+    xt = clean + sigma * rng.normal(size=n)
+    rec = Record({"x_e": xe, "x_t": xt}, dt=dt)
+    family = TMFFamily(order=4)
+    exp = family.prepare(rec, "ringing")
+    # the FIR regression cannot represent a mode that rings for 1/(ζω) = 2.7 s
+    assert math.sqrt(exp.noise_var) > 3 * sigma
+    model = GapModel(StableTMF.from_rational(jaxvs.RationalTF(num, den), 100.0, dt))
+    nulls = family.null_experiments(model, [exp], np.random.default_rng(2), 4)
+    added = np.concatenate([ns[0].y - clean for ns in nulls])
+    # the residual of the exact TMF: the noise, less its first sample (the record is
+    # taken relative to its first sample)
+    resid = float(np.sqrt(np.mean((exp.y - clean) ** 2)))
+    assert resid < 2 * sigma
+    # 4 × 6000 samples: the sample std of white noise within 5 % of its level; the
+    # model's prediction of the exact TMF equals the scipy simulation to rounding
+    assert float(np.std(added)) == pytest.approx(resid, rel=0.05)

@@ -108,83 +108,6 @@ def _stack_models(models: Sequence[GapModel]) -> GapModel:
     return eqx.combine(stacked, static)
 
 
-def _index_model(models: GapModel, i: int) -> GapModel:
-    arrays, static = eqx.partition(models, eqx.is_array)
-    return eqx.combine(jax.tree_util.tree_map(lambda x: x[i], arrays), static)
-
-
-@eqx.filter_jit
-def _fit_many(models: GapModel, psize, batch, wfit, max_steps: int, data_axis: int | None):
-    """For each stacked starting model (same structure): least-squares values of the
-    parameters selected by `psize` (the candidate's sizes, one one-hot column each), then
-    LM on every free parameter (weights `wfit`: zero on held-out rows). With `data_axis`
-    0, `batch` and `wfit` carry one data set per model (the null records); with `None`
-    every model sees the same data. Returns the calibrated (constrained) models, the cost
-    after LM and after the least-squares start, and the predictions on every row."""
-
-    def one(model: GapModel, ps, batch, wfit):
-        inputs = _model_inputs(batch)
-        y = batch["y"]
-        spec = free_spec(model)
-        params, static = eqx.partition(model, spec)
-        flat, unravel = jax.flatten_util.ravel_pytree(params)
-
-        def resid(theta):
-            m = unwrap(eqx.combine(unravel(theta), static))
-            return ((jax.vmap(m)(inputs) - y) * wfit).ravel()
-
-        # least-squares start of the candidate's sizes (exact when it is linear in them)
-        r0 = resid(flat)
-        js = jax.vmap(lambda v: jax.jvp(resid, (flat,), (v,))[1])(ps.T)  # (s, N)
-        norms = jnp.linalg.norm(js, axis=1)
-        safe = jnp.where(norms > 0, norms, 1.0)
-        jn = js / safe[:, None]
-        gram = jn @ jn.T + 1e-10 * jnp.eye(jn.shape[0], dtype=jn.dtype)
-        delta = -jnp.linalg.solve(gram, jn @ r0) / safe
-        delta = jnp.where(jnp.all(jnp.isfinite(delta)), delta, 0.0)
-        flat = flat + ps @ delta
-
-        def evaluate(theta, args):
-            r = resid(theta)
-            jac = jax.jacfwd(resid)(theta)
-            return 0.5 * jnp.dot(r, r), jac.T @ jac, jac.T @ r
-
-        state = lm_init(evaluate, flat, None, 1e-8)
-        cost_start = state.cost
-        state = jax.lax.while_loop(
-            lambda s: lm_running(s, max_steps),
-            lambda s: lm_step(evaluate, lambda t: jnp.asarray(True), s, None, 1e-8),
-            state,
-        )
-        final = eqx.combine(unravel(state.theta), static)
-        pred = jax.vmap(unwrap(final))(inputs)
-        return final, state.cost, cost_start, pred
-
-    return eqx.filter_vmap(one, in_axes=(0, 0, data_axis, data_axis))(models, psize, batch, wfit)
-
-
-def size_selector(model: GapModel, slot: int | None, width: int) -> np.ndarray:
-    """One-hot columns selecting the `size` entries of effect `slot` in the flat vector of
-    the model's free parameters (zero columns pad to `width`)."""
-    cm = model.constrained()
-    params, _ = eqx.partition(cm, free_spec(cm))
-    marker = jax.tree_util.tree_map(jnp.zeros_like, params)
-    n_all = int(jax.flatten_util.ravel_pytree(marker)[0].size)
-    out = np.zeros((n_all, width))
-    if slot is None or not hasattr(model.effects[slot], "size"):
-        return out
-    leaf = marker.effects[slot].size
-    marker = eqx.tree_at(
-        lambda m: m.effects[slot].size, marker, jnp.arange(1, leaf.size + 1, dtype=leaf.dtype)
-    )
-    flat = np.asarray(jax.flatten_util.ravel_pytree(marker)[0])
-    for k in range(1, int(leaf.size) + 1):
-        idx = np.flatnonzero(flat == k)
-        if idx.size and k - 1 < width:
-            out[idx[0], k - 1] = 1.0
-    return out
-
-
 def fit_many(
     models: Sequence[GapModel],
     slots: Sequence[int | None],
@@ -192,12 +115,14 @@ def fit_many(
     n_cal: int,
     scale: float,
     max_steps: int,
+    layout: Layout,
 ) -> tuple[list[GapModel], np.ndarray, np.ndarray, list[list[np.ndarray]]]:
     """Calibrate several starting models of one structure on the first `n_cal`
-    experiments in one vectorised call (the sizes of effect `slots[i]` of start `i` are
-    first set by least squares). `experiments` is one list of experiments for all the
-    models, or one list per model (the null records: start `i` on data set `i`).
-    Returns the (physical) models, their calibration SSR after LM and at the
+    experiments through the one fixed structure of `layout` (so the compiled function is
+    shared with every other structure of the search); the sizes of effect `slots[i]` of
+    start `i` are first set by least squares. `experiments` is one list of experiments
+    for all the models, or one list per model (the null records: start `i` on data set
+    `i`). Returns the (physical) models, their calibration SSR after LM and at the
     least-squares start (the signature), and their predictions on every experiment."""
     per_model = not isinstance(experiments[0], Experiment)
     if per_model:
@@ -211,24 +136,235 @@ def fit_many(
         wfit = batch["w"].at[n_cal:].set(0.0)
         data_axis = None
         exp_lists = [list(experiments)] * len(models)
-    width = max(
-        [
-            int(np.size(m.effects[s].size))
-            for m, s in zip(models, slots)
-            if s is not None and hasattr(m.effects[s], "size")
-        ]
-        or [1]
+    if not layout.covers(models[0]) or not layout.keys <= set(batch):
+        raise ValueError(
+            f"fit_many: the layout has slots {layout.names} for data {sorted(layout.keys)}; "
+            f"got effects {models[0].effect_names} and data {sorted(batch)}. Build the "
+            "layout from the library and the refreshed experiments."
+        )
+    fitted, cost, cost_start, pred = _fit_layout(
+        layout, models, slots, batch, wfit, max_steps, data_axis
     )
-    psize = jnp.asarray(np.stack([size_selector(m, s, width) for m, s in zip(models, slots)]))
-    stacked = _stack_models([m.constrained() for m in models])
-    out, cost, cost_start, pred = _fit_many(stacked, psize, batch, wfit, max_steps, data_axis)
     cost = np.asarray(cost) * 2.0 / scale**2
     cost = np.where(np.isfinite(cost), cost, np.inf)
     cost_start = np.asarray(cost_start) * 2.0 / scale**2
     cost_start = np.where(np.isfinite(cost_start), cost_start, np.inf)
-    fitted = [unwrap(_index_model(out, i)) for i in range(len(models))]
-    preds = [_unstack(np.asarray(pred)[i], exp_lists[i]) for i in range(len(models))]
+    fitted = [unwrap(m) for m in fitted]
+    preds = [_unstack(np.asarray(pred)[i], exp_lists[i]) for i in range(len(fitted))]
     return fitted, cost, cost_start, preds
+
+
+# ------------------------------------------------------------------------------ one structure
+
+
+class Layout:
+    """One fixed model structure for a whole search: the nominal model and one slot per
+    effect of the family's library (in library order), each slot holding either an
+    effect of the model being fitted or a default instance of the same shapes. Which
+    slots act is an array (`active`), and the parameters calibrated are chosen by a
+    selection matrix of fixed width, so every candidate of every round, and the null
+    records, are calibrated by the same compiled function (one compilation per batch
+    mode instead of one per candidate and round). Inactive slots are skipped by
+    `lax.cond`, so they cost nothing at run time.
+
+    `width` is the number of calibrated parameters the selection is padded to: it grows
+    in steps of `granularity` when a model needs more (one more compilation)."""
+
+    def __init__(self, defaults, keys, batch: int, granularity: int = 2):
+        self.defaults = tuple(defaults)
+        self.keys = frozenset(keys)  # the data every slot reads (refreshed experiments)
+        self.names = tuple(e.name for e in self.defaults)
+        self.batch = batch  # starts per call: every call has this many, padded or chunked
+        self.granularity = granularity
+        self.width = 0  # calibrated parameters per call, fixed at the first call
+
+    def covers(self, model: GapModel) -> bool:
+        return all(e.name in self.names for e in model.effects)
+
+    def fixed(self, model: GapModel) -> tuple[_Fixed, np.ndarray]:
+        by = {e.name: e for e in model.effects}
+        effects = tuple(by.get(d.name, d.constrained()) for d in self.defaults)
+        active = np.array([n in by for n in self.names])
+        return _Fixed(model.nominal, effects), active
+
+    def back(self, fixed: _Fixed, like: GapModel) -> GapModel:
+        """The fitted fixed model as a `GapModel` with the effects of `like`, in its order."""
+        slots = [self.names.index(e.name) for e in like.effects]
+        return GapModel(fixed.nominal, tuple(fixed.effects[i] for i in slots))
+
+
+class _Fixed(eqx.Module):
+    """The nominal model and every slot of a [`Layout`][]; `active` picks the slots."""
+
+    nominal: eqx.Module
+    effects: tuple
+
+    def __call__(self, arrays, active):
+        y = self.nominal(arrays)
+        order = sorted(range(len(self.effects)), key=lambda i: (self.effects[i].order, i))
+        for i in order:
+            eff = self.effects[i]
+            y = jax.lax.cond(
+                active[i],
+                lambda y, eff=eff: eff.apply(y, arrays, self.nominal),
+                lambda y: y,
+                y,
+            )
+        return y
+
+
+def _owners(cm) -> np.ndarray:
+    """For every entry of the flat vector of free parameters of a constrained `_Fixed`
+    model: 0 for the nominal model, `i + 1` for slot `i`."""
+    params, _ = eqx.partition(cm, free_spec(cm))
+    zeros = jax.tree_util.tree_map(jnp.zeros_like, params)
+    n_all = int(jax.flatten_util.ravel_pytree(zeros)[0].size)
+    owners = np.full(n_all, -1)
+    getters = [lambda m: m.nominal] + [
+        (lambda m, i=i: m.effects[i]) for i in range(len(cm.effects))
+    ]
+    for c, get in enumerate(getters):
+        sub = get(zeros)
+        if not jax.tree_util.tree_leaves(sub):
+            continue
+        marked = eqx.tree_at(get, zeros, jax.tree_util.tree_map(jnp.ones_like, sub))
+        flat = np.asarray(jax.flatten_util.ravel_pytree(marked)[0])
+        owners[flat == 1] = c
+    return owners
+
+
+@eqx.filter_jit
+def _fit_fixed(arrays, static, active, sel, psize, batch, wfit, max_steps: int, data_axis):
+    """[`_fit_many`][] for a [`Layout`][]: the starts' arrays (`arrays`, stacked) share
+    `static`, the slots `active` and the selection `sel` (free entries calibrated, zero
+    columns pad it to a fixed width)."""
+
+    def one(arr, ps, batch, wfit):
+        model = eqx.combine(arr, static)
+        inputs = _model_inputs(batch)
+        y = batch["y"]
+        spec = free_spec(model)
+        params, pstatic = eqx.partition(model, spec)
+        flat, unravel = jax.flatten_util.ravel_pytree(params)
+
+        def full(theta_full):
+            m = unwrap(eqx.combine(unravel(theta_full), pstatic))
+            return ((jax.vmap(lambda a: m(a, active))(inputs) - y) * wfit).ravel()
+
+        r0 = full(flat)
+        js = jax.vmap(lambda v: jax.jvp(full, (flat,), (v,))[1])(ps.T)  # (s, N)
+        norms = jnp.linalg.norm(js, axis=1)
+        safe = jnp.where(norms > 0, norms, 1.0)
+        jn = js / safe[:, None]
+        gram = jn @ jn.T + 1e-10 * jnp.eye(jn.shape[0], dtype=jn.dtype)
+        delta = -jnp.linalg.solve(gram, jn @ r0) / safe
+        delta = jnp.where(jnp.all(jnp.isfinite(delta)), delta, 0.0)
+        flat = flat + ps @ delta
+        base = flat - sel @ (sel.T @ flat)
+
+        def resid(theta):
+            return full(base + sel @ theta)
+
+        def evaluate(theta, args):
+            r = resid(theta)
+            jac = jax.jacfwd(resid)(theta)
+            return 0.5 * jnp.dot(r, r), jac.T @ jac, jac.T @ r
+
+        state = lm_init(evaluate, sel.T @ flat, None, 1e-8)
+        cost_start = state.cost
+        state = jax.lax.while_loop(
+            lambda s: lm_running(s, max_steps),
+            lambda s: lm_step(evaluate, lambda t: jnp.asarray(True), s, None, 1e-8),
+            state,
+        )
+        final = eqx.combine(unravel(base + sel @ state.theta), pstatic)
+        pred = jax.vmap(lambda a: unwrap(final)(a, active))(inputs)
+        return eqx.filter(final, eqx.is_array), state.cost, cost_start, pred
+
+    return jax.vmap(one, in_axes=(0, 0, data_axis, data_axis))(arrays, psize, batch, wfit)
+
+
+def _fit_layout(layout: Layout, models, slots, batch, wfit, max_steps, data_axis):
+    """Calibrate `models` (one structure) through the layout's fixed structure, in calls
+    of exactly `layout.batch` starts (the last padded by repeating the first start), each
+    start on its own copy of the data."""
+    count = len(models)
+    fixed = [layout.fixed(m.constrained()) for m in models]
+    active = fixed[0][1]
+    cms = [f for f, _ in fixed]
+    owners = _owners(cms[0])
+    chosen = np.flatnonzero((owners == 0) | np.isin(owners - 1, np.flatnonzero(active)))
+    if not layout.width:
+        # room for the nominal model and the two largest slots from the start (one more
+        # compilation only when a model outgrows it)
+        counts = sorted(int(np.sum(owners == i + 1)) for i in range(len(layout.names)))
+        layout.width = int(np.sum(owners == 0)) + sum(counts[-2:])
+    g = layout.granularity
+    layout.width = max(layout.width, chosen.size)
+    width = int(np.ceil(layout.width / g)) * g
+    sel = np.zeros((owners.size, width))
+    sel[chosen, np.arange(chosen.size)] = 1.0
+    size_width = max([int(np.size(d.size)) for d in layout.defaults if hasattr(d, "size")] or [1])
+    psize = []
+    for f, (m, s) in zip(cms, zip(models, slots)):
+        slot = None if s is None else layout.names.index(m.effects[s].name)
+        psize.append(_fixed_size_selector(f, slot, size_width))
+    if data_axis is None:  # every start sees the same data: one copy per start
+        batch = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (count,) + x.shape), batch)
+        wfit = jnp.broadcast_to(wfit, (count,) + wfit.shape)
+    # calls of exactly `layout.batch` starts (the last one padded): one compiled function
+    b = layout.batch
+    n_pad = -count % b
+    idx = np.concatenate([np.arange(count), np.zeros(n_pad, int)])
+    cms = [cms[i] for i in idx]
+    psize = np.stack([psize[i] for i in idx])
+    active_j, sel_j = jnp.asarray(active), jnp.asarray(sel)
+    outs = []
+    static = None
+    for c0 in range(0, idx.size, b):
+        part = idx[c0 : c0 + b]
+        arrays, static = eqx.partition(_stack_models(cms[c0 : c0 + b]), eqx.is_array)
+        take = lambda x: x[jnp.asarray(part)]  # noqa: E731
+        outs.append(
+            _fit_fixed(
+                arrays,
+                static,
+                active_j,
+                sel_j,
+                jnp.asarray(psize[c0 : c0 + b]),
+                jax.tree_util.tree_map(take, batch),
+                take(wfit),
+                max_steps,
+                0,
+            )
+        )
+    out, cost, cost_start, pred = jax.tree_util.tree_map(
+        lambda *xs: jnp.concatenate(xs)[:count], *outs
+    )
+    fitted = []
+    for i in range(count):
+        arr_i = jax.tree_util.tree_map(lambda x: x[i], out)
+        fitted.append(layout.back(eqx.combine(arr_i, static), models[i]))
+    return fitted, cost, cost_start, pred
+
+
+def _fixed_size_selector(cm: _Fixed, slot: int | None, width: int) -> np.ndarray:
+    params, _ = eqx.partition(cm, free_spec(cm))
+    marker = jax.tree_util.tree_map(jnp.zeros_like, params)
+    n_all = int(jax.flatten_util.ravel_pytree(marker)[0].size)
+    out = np.zeros((n_all, width))
+    if slot is None or not hasattr(cm.effects[slot], "size"):
+        return out
+    leaf = marker.effects[slot].size
+    marker = eqx.tree_at(
+        lambda m: m.effects[slot].size, marker, jnp.arange(1, leaf.size + 1, dtype=leaf.dtype)
+    )
+    flat = np.asarray(jax.flatten_util.ravel_pytree(marker)[0])
+    for k in range(1, int(leaf.size) + 1):
+        idx = np.flatnonzero(flat == k)
+        if idx.size and k - 1 < width:
+            out[idx[0], k - 1] = 1.0
+    return out
 
 
 # ------------------------------------------------------------------------------ results
@@ -398,8 +534,10 @@ def search(
         )
 
     say("recalibrating the nominal model")
+    # the nominal model alone: a layout without slots (one call per start)
+    bare = Layout([], exps[0].arrays.keys(), batch=1)
     (model,), cost, _, (pred,) = fit_many(
-        [GapModel(family.nominal(calibration))], [None], exps, n_cal_exp, scale, max_steps
+        [GapModel(family.nominal(calibration))], [None], exps, n_cal_exp, scale, max_steps, bare
     )
     nominal_model = model
     res_all = [e.y - p for e, p in zip(exps, pred)]
@@ -435,7 +573,7 @@ def search(
     say(f"simulating {n_null} effect-free records of the same set-up (the null)")
     null_sets = family.null_experiments(model, exps, rng, n_null)
     null_fit, _, _, null_pred = fit_many(
-        [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps
+        [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps, bare
     )
     null_res = [[e.y - p for e, p in zip(ns, pr)] for ns, pr in zip(null_sets, null_pred)]
     null_gaps = [_nrmse_rows(r[n_cal_exp:], ns[n_cal_exp:]) for r, ns in zip(null_res, null_sets)]
@@ -444,6 +582,7 @@ def search(
     say(f"noise floor (median gap of the nominal model on the null records): {noise_floor:.4g}")
 
     dof0 = _dof(model, exps[:n_cal_exp])
+    layout: Layout | None = None
     for rnd in range(1, max_effects + 1):
         ssr0 = float(cost[0])
         e_val0 = np.concatenate(res_all[n_cal_exp:])
@@ -479,8 +618,16 @@ def search(
         ctx = Context(model, exps[:n_cal_exp], res_all[:n_cal_exp], family.options)
         t_round = time.perf_counter()
         round_results: list[CandidateResult] = []
+        all_templates = {s.name: s.templates(ctx) for s in open_specs}
+        if layout is None:
+            # one fixed structure for the rest of the search (Layout)
+            layout = Layout(
+                [all_templates[s.name][0] for s in library if all_templates.get(s.name)],
+                exps[0].arrays.keys(),
+                batch=max(len(t) for t in all_templates.values()),
+            )
         for s in open_specs:
-            templates = s.templates(ctx)
+            templates = all_templates[s.name]
             if not templates:
                 continue
             replaces = s.extends if s.extends in accepted else None
@@ -489,7 +636,7 @@ def search(
             say(f"round {rnd}: {s.name} from {len(starts)} starting point(s)")
             slot = len(starts[0].effects) - 1
             fitted, costs, starts_ssr, preds = fit_many(
-                starts, [slot] * len(starts), exps, n_cal_exp, scale, max_steps
+                starts, [slot] * len(starts), exps, n_cal_exp, scale, max_steps, layout
             )
             c = candidates[s.name]
             c.seconds += time.perf_counter() - t0
@@ -554,7 +701,7 @@ def search(
                 for ns, nm in zip(null_starts, null_models)
             ]
             _, _, _, pr1 = fit_many(
-                null_starts, [slot] * n_null, null_sets, n_cal_exp, scale, max_steps
+                null_starts, [slot] * n_null, null_sets, n_cal_exp, scale, max_steps, layout
             )
             gains = []
             for ns, nr, p in zip(null_sets, null_res, pr1):
@@ -615,7 +762,7 @@ def search(
         cost = np.array([ssr])
         # the current model refitted on every null record, for the next round's null
         null_models, _, _, null_pred = fit_many(
-            [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps
+            [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps, layout
         )
         null_res = [[e.y - p for e, p in zip(ns, pr)] for ns, pr in zip(null_sets, null_pred)]
         say(f"round {rnd}: accepted {chosen.effect} (validation gap {chosen.validation_gap:.4f})")

@@ -44,18 +44,10 @@ def block_length(residual: np.ndarray, *, minimum: int = 8, maximum: int | None 
     `L = max(minimum, ⌈2τ⌉, ⌈N^{1/3}⌉)`, capped at `N/10` so that at least ten blocks
     exist. Blocks several correlation times long keep the dependence inside a block.
     """
-    e = np.asarray(residual, dtype=float)
-    e = e - e.mean()
-    n = e.size
-    if n < 4 or not np.any(e):
+    n = np.size(residual)
+    tau = integrated_time(residual)
+    if tau is None:
         return max(1, min(minimum, n))
-    nfft = 1 << int(math.ceil(math.log2(2 * n)))
-    f = np.fft.rfft(e, nfft)
-    acf = np.fft.irfft(f * np.conj(f), nfft)[:n]
-    acf = acf / acf[0]
-    nonpos = np.nonzero(acf[1:] <= 0.0)[0]
-    k = int(nonpos[0]) + 1 if nonpos.size else n
-    tau = 1.0 + 2.0 * float(np.sum(acf[1:k]))
     cap = max(1, n // 10) if maximum is None else maximum
     return int(min(cap, max(minimum, math.ceil(2.0 * tau), math.ceil(n ** (1.0 / 3.0)))))
 
@@ -200,19 +192,29 @@ def effective_samples(residual: np.ndarray) -> float:
     to the first non-positive autocorrelation, Geyer's initial positive sequence).
     An information criterion with `N_eff` in place of `N` does not count correlated
     samples as independent evidence (Box, Jenkins & Reinsel, *Time Series Analysis*)."""
+    n = np.size(residual)
+    tau = integrated_time(residual)
+    if tau is None:
+        return float(max(n, 1))
+    return float(n / max(1.0, tau))
+
+
+def integrated_time(residual: np.ndarray) -> float | None:
+    """The integrated autocorrelation time `τ = 1 + 2 Σ ρ_k` of a series [samples],
+    summed up to the first non-positive autocorrelation (Geyer's initial positive
+    sequence); `None` for fewer than 4 samples or a constant series."""
     e = np.asarray(residual, dtype=float)
     e = e - e.mean()
     n = e.size
     if n < 4 or not np.any(e):
-        return float(max(n, 1))
+        return None
     nfft = 1 << int(math.ceil(math.log2(2 * n)))
     f = np.fft.rfft(e, nfft)
     acf = np.fft.irfft(f * np.conj(f), nfft)[:n]
     acf = acf / acf[0]
     nonpos = np.nonzero(acf[1:] <= 0.0)[0]
     k = int(nonpos[0]) + 1 if nonpos.size else n
-    tau = max(1.0, 1.0 + 2.0 * float(np.sum(acf[1:k])))
-    return float(n / tau)
+    return 1.0 + 2.0 * float(np.sum(acf[1:k]))
 
 
 def bic_effective(ssr: float, n: int, p: int, n_eff: float) -> float:

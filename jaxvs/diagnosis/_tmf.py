@@ -705,12 +705,19 @@ class TMFFamily(AbstractFamily):
         count: int,
     ) -> list[list[Experiment]]:
         """The calibrated TMF driven by each record's own `x_e`, plus white noise of the
-        record's noise level (the FIR-regression residual) and the record's quantisation
-        of `x_t` (a random zero per draw)."""
+        record's noise level and the record's quantisation of `x_t` (a random zero per
+        draw).
+
+        The noise level is the smaller of two upper bounds of the record's noise: the
+        residual of a long FIR regression (`noise_var`; it also holds what 150 taps cannot
+        represent, e.g. the slow decay of a lightly damped low mode) and the RMS residual
+        of the calibrated nominal TMF itself (it also holds any unmodelled effect). On an
+        effect-free record the second is the noise, so the null's gap is the record's."""
         out: list[list[Experiment]] = [[] for _ in range(count)]
         for exp in experiments:
             clean = predict(model, exp)
-            sigma = math.sqrt(max(exp.noise_var, 0.0))
+            rms_resid = float(np.sqrt(np.mean((exp.y - clean) ** 2)))
+            sigma = min(math.sqrt(max(exp.noise_var, 0.0)), rms_resid)
             step = exp.resolution
             for k in range(count):
                 y = clean + sigma * rng.standard_normal(clean.shape)
