@@ -19,13 +19,13 @@ from jaxvs._cli import main
 from jaxvs.data import Record, save_csv
 from jaxvs.diagnosis._base import AdmissibilityContext
 from jaxvs.diagnosis._drive import (
-    AsymmetricFriction,
+    AsymmetricFrictionEffect as AsymmetricFriction,
     Backlash,
-    CoulombFriction,
+    CoulombEffect as CoulombFriction,
     ExternalForce,
-    PositionDependence,
+    PositionForceEffect as PositionDependence,
     Resonance,
-    StribeckFriction,
+    StribeckEffect as StribeckFriction,
     TimeDelay,
     identify_controller,
 )
@@ -39,10 +39,10 @@ from jaxvs.diagnosis._thermal import (
 )
 from jaxvs.diagnosis._tmf import (
     MissingMode,
-    PositionDependence as TMFPositionDependence,
     ProcessForce,
     SensorDelay,
     StableTMF,
+    TMFPositionEffect as TMFPositionDependence,
 )
 from jaxvs.twins import DriveTwin
 

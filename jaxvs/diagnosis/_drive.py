@@ -64,14 +64,14 @@ from ._stats import (
     white_noise_floor,
 )
 
-__all__ = ["DriveFamily", "RigidAxis"]
+__all__ = ["DriveFamily", "RigidNominal"]
 
 
 def _f(x) -> float:
     return float(np.asarray(x).reshape(-1)[0])
 
 
-class RigidAxis(eqx.Module):
+class RigidNominal(eqx.Module):
     """Nominal rigid axis, `u = M q̈ + Fv q̇ + offset` [N]."""
 
     M: Float[Array, ""]
@@ -98,7 +98,7 @@ def _ok(x) -> bool:
     return bool(np.all(np.isfinite(np.asarray(x))))
 
 
-class CoulombFriction(AbstractAdditiveEffect):
+class CoulombEffect(AbstractAdditiveEffect):
     """Dry friction of constant level, the library's `jaxvs.models.CoulombFriction`
     (`Fc·tanh(q̇/v_s)`, sharpness `v_s` fixed)."""
 
@@ -126,7 +126,7 @@ class CoulombFriction(AbstractAdditiveEffect):
         return {"Fc": _f(self.size[0]), "v_s": _f(self.vs)}
 
 
-class AsymmetricFriction(AbstractAdditiveEffect):
+class AsymmetricFrictionEffect(AbstractAdditiveEffect):
     """Direction-dependent Coulomb and viscous friction, the library's
     `jaxvs.models.AsymmetricFriction` (Janot et al. 2019, eq. 12) with levels `Fc+`,
     `Fc−` and viscous coefficients `±ΔFv/2` on top of the nominal `Fv`."""
@@ -167,7 +167,7 @@ class AsymmetricFriction(AbstractAdditiveEffect):
         return {"Fc_pos": fp, "Fc_neg": fn, "dFv": dfv, "v_s": _f(self.vs)}
 
 
-class StribeckFriction(AbstractAdditiveEffect):
+class StribeckEffect(AbstractAdditiveEffect):
     """Friction falling from a static level `Fs` to the Coulomb level `Fc` over the
     Stribeck speed, the library's `jaxvs.models.StribeckFriction` (Armstrong-Hélouvry
     et al. 1994, eq. 5)."""
@@ -392,7 +392,7 @@ def _legendre(x: Array, degree: int) -> Array:
     return jnp.stack(cols, axis=-1)
 
 
-class PositionDependence(AbstractAdditiveEffect):
+class PositionForceEffect(AbstractAdditiveEffect):
     """`Σ c_k P_k(q̄) + A·sin(2πq/p) + B·cos(2πq/p)`: a smooth force over the travel
     (Legendre terms: gravity, a spring) plus a ripple of pitch `p` (cogging)."""
 
@@ -489,14 +489,14 @@ def _vs_default(ctx: Context) -> float:
 
 def _t_coulomb(ctx: Context) -> list[AbstractEffect]:
     vm = _vmax(ctx)
-    return [CoulombFriction(jnp.zeros(1), jnp.asarray(f * vm)) for f in (0.002, 0.01)]
+    return [CoulombEffect(jnp.zeros(1), jnp.asarray(f * vm)) for f in (0.002, 0.01)]
 
 
 def _t_asym(ctx: Context) -> list[AbstractEffect]:
     base = _existing(ctx, "coulomb_friction")
     vs = base.vs if base is not None else jnp.asarray(_vs_default(ctx))
     fc = base.size[0] if base is not None else 0.0
-    return [AsymmetricFriction(jnp.array([fc, fc, 0.0]), vs)]
+    return [AsymmetricFrictionEffect(jnp.array([fc, fc, 0.0]), vs)]
 
 
 def _t_stribeck(ctx: Context) -> list[AbstractEffect]:
@@ -504,7 +504,7 @@ def _t_stribeck(ctx: Context) -> list[AbstractEffect]:
     vs = base.vs if base is not None else jnp.asarray(_vs_default(ctx))
     fc = base.size[0] if base is not None else 0.0
     vm = _vmax(ctx)
-    return [StribeckFriction(jnp.array([fc, fc]), jnp.asarray(f * vm), vs) for f in (0.02, 0.1)]
+    return [StribeckEffect(jnp.array([fc, fc]), jnp.asarray(f * vm), vs) for f in (0.02, 0.1)]
 
 
 def _t_backlash(ctx: Context) -> list[AbstractEffect]:
@@ -561,7 +561,7 @@ def _t_position(ctx: Context) -> list[AbstractEffect]:
     spec[:3] = 0.0
     top = np.argsort(spec)[::-1][:2]
     pitches = [span / k for k in top if k > 0] + [span / 1.5]
-    return [PositionDependence(jnp.zeros(5), jnp.asarray(p), centre, half) for p in pitches]
+    return [PositionForceEffect(jnp.zeros(5), jnp.asarray(p), centre, half) for p in pitches]
 
 
 def _t_external(ctx: Context) -> list[AbstractEffect]:
@@ -839,13 +839,13 @@ class DriveFamily(AbstractFamily):
     def describe_nominal(self) -> str:
         return "rigid axis M q̈ + Fv q̇ + offset = u (inverse dynamics, force predicted from motion)"
 
-    def nominal(self, experiments: Sequence[Experiment]) -> RigidAxis:
+    def nominal(self, experiments: Sequence[Experiment]) -> RigidNominal:
         phi = np.concatenate(
             [np.stack([e.arrays["a"], e.arrays["v"], np.ones(e.n)], -1) for e in experiments]
         )
         y = np.concatenate([e.y for e in experiments])
         th, *_ = np.linalg.lstsq(phi, y, rcond=None)
-        return RigidAxis(jnp.asarray(th[0]), jnp.asarray(th[1]), jnp.asarray(th[2]))
+        return RigidNominal(jnp.asarray(th[0]), jnp.asarray(th[1]), jnp.asarray(th[2]))
 
     def library(self) -> list[EffectSpec]:
         return [

@@ -300,7 +300,7 @@ def _positive(x) -> Positive:
     return Positive(jnp.log(jnp.maximum(x, 1e-12)))
 
 
-class PositionDependence(AbstractAdditiveEffect):
+class TMFPositionEffect(AbstractAdditiveEffect):
     """TMF coefficients linear in the other axis' position: `B(σ; y) = B₀(σ) + x·ΔB(σ)`,
     `A(σ; y) = A₀(σ) + x·ΔA(σ)` (monic), `x = (y − ȳ)/h` with `ȳ`, `h` the centre and
     half-range of the calibration positions.
@@ -514,7 +514,7 @@ def _t_position(ctx: Context) -> list[AbstractEffect]:
     half = max((hi - lo) / 2, 1e-12)
     n1 = int(ctx.model.nominal.num.shape[0])
     return [
-        PositionDependence(jnp.zeros(2 * n1 - 1), jnp.asarray((lo + hi) / 2), jnp.asarray(half))
+        TMFPositionEffect(jnp.zeros(2 * n1 - 1), jnp.asarray((lo + hi) / 2), jnp.asarray(half))
     ]
 
 
