@@ -318,7 +318,7 @@ _PER_COMMAND = [
         "a CSV cut off in the middle of its last row",
         _edited(lambda text: text[:-25]),
         None,
-        r"cells but the header has 4 columns; complete or remove that line \(a truncated",
+        r"ends inside a row.*looks truncated.*Export it again",
     ),
     (
         "header-only",
@@ -546,7 +546,7 @@ CASES += [
             [write_csv(tmp / "n.csv", {**_drive_columns(), "u": np.full(N, np.nan)})],
             tmp,
         ),
-        r"n\.csv: Signal 'u' has a non-finite value.*Remove or interpolate",
+        r"n\.csv'?: Signal 'u' has a non-finite value.*Remove or interpolate",
     ),
     refused(
         "design-out-missing",

@@ -14,8 +14,8 @@ import pytest
 import jaxvs
 from jaxvs.diagnosis._tmf import (
     MissingMode,
-    PositionDependence,
     StableTMF,
+    TMFPositionEffect,
     fft_delay,
 )
 from jaxvs.twins import MachineStructureTwin
@@ -63,7 +63,7 @@ def test_missing_mode_and_position_dependence_match_rational_simulation(u):
     )
     # moved coefficients: B + x ΔB over A + x ΔA, simulated by jaxvs from the coefficients
     size = jnp.array([0.0, 0.0, 0.01, -0.02, 0.03, 0.02, -0.05, 0.1, 0.03])
-    eff = PositionDependence(size, 0.2, 0.1)
+    eff = TMFPositionEffect(size, 0.2, 0.1)
     d = {"x_e": u, "pos_y": jnp.full(u.shape, 0.4)}  # x = 2
     got = np.asarray(model(d) + eff.contribution(d, model))
     powers = 1000.0 ** np.arange(5)
@@ -72,7 +72,7 @@ def test_missing_mode_and_position_dependence_match_rational_simulation(u):
     ref = np.asarray(jaxvs.simulate(jaxvs.RationalTF(num, den), u, DT))
     np.testing.assert_allclose(got, ref, atol=1e-10 * np.abs(ref).max())
     # zero size is exactly the nominal model (the engine gates effects by data)
-    zero = PositionDependence(jnp.zeros(9), 0.2, 0.1).contribution(d, model)
+    zero = TMFPositionEffect(jnp.zeros(9), 0.2, 0.1).contribution(d, model)
     assert np.all(np.asarray(zero) == 0.0)
 
 
