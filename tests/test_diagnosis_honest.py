@@ -180,6 +180,10 @@ def test_thermal_effects_admissibility():
     assert _verdict(AmbientTemperature(jnp.array([0.3]), jnp.asarray(20.0)), ctx)[0]
     ok, why = _verdict(CoolantTemperature(jnp.array([2.5]), jnp.asarray(18.0)), ctx)
     assert not ok and "passive" in why
+    # a negative weight of a measured temperature is no heat path (Kron reduction of a
+    # conductance network keeps every weight >= 0): it stands in for a lag
+    ok, why = _verdict(AmbientTemperature(jnp.array([-0.3]), jnp.asarray(20.0)), ctx)
+    assert not ok and "non-negative weight" in why
     # nominal slope c1 = 1e-3 K/rpm · 10 000 rpm = 10 K; c2 = −20 K makes the total heat
     # fall with speed above x = 0.25
     assert _verdict(SpeedNonlinearity(jnp.array([3.0, 1.0]), jnp.asarray(1e4)), ctx)[0]
@@ -404,3 +408,41 @@ def test_tmf_null_noise_is_not_above_the_nominal_residual():
     # 4 × 6000 samples: the sample std of white noise within 5 % of its level; the
     # model's prediction of the exact TMF equals the scipy simulation to rounding
     assert float(np.std(added)) == pytest.approx(resid, rel=0.05)
+
+
+@pytest.mark.slow
+def test_backward_elimination_removes_a_proxy_the_final_model_does_not_need(monkeypatch):
+    # The twin's bearing feels the cooling water; the air temperature is made a partial
+    # proxy of it (half the water's swing plus a 3-hour swing of its own). A greedy order
+    # that takes the proxy first (forced here) then needs the water as well; tested
+    # against the final model without it, the proxy explains nothing and must go, while
+    # the water stays and is the primary effect.
+    from jaxvs.diagnosis import _engine
+    from jaxvs.twins import SpindleThermalTwin
+
+    rec = SpindleThermalTwin(effects={"coolant_temperature": 5.0}).experiment(
+        jr.key(3), duration=12 * 3600.0
+    )
+    tw, ta = np.asarray(rec["T_water"]), np.asarray(rec["T_air"])
+    swing = np.sin(2 * np.pi * np.arange(tw.size) * float(rec.dt) / 10800.0)
+    rec = rec.with_signal("T_air", ta + 0.5 * (tw - tw.mean()) + swing).select(
+        ["T_chassis", "T_bearing", "v_m", "T_air", "T_water"]
+    )
+    greedy = _engine.choose
+
+    def proxy_first(passing, accepted):
+        proxy = [c for c in passing if c.effect == "ambient_temperature"]
+        return proxy[0] if proxy else greedy(passing, accepted)
+
+    monkeypatch.setattr(_engine, "choose", proxy_first)
+    rep = jaxvs.diagnose(rec, family="thermal")
+    assert [r["round"] for r in rep["rounds"]][:2] == [1, 2]
+    assert "ambient_temperature" in rep["rounds"][0]["tried"]
+    pruned = {p["effect"]: p for p in rep["pruning"]}
+    assert set(pruned) == {"ambient_temperature", "coolant_temperature"}
+    assert not pruned["ambient_temperature"]["kept"]
+    assert pruned["coolant_temperature"]["kept"]
+    assert rep.verdict["effects"] == ["coolant_temperature"]
+    assert rep.verdict["primary"] == "coolant_temperature"
+    ambient = next(c for c in rep.candidates if c["effect"] == "ambient_temperature")
+    assert not ambient["accepted"] and "removed after the search" in ambient["rejected_by"]

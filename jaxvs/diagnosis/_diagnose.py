@@ -375,6 +375,7 @@ def diagnose(
             "options": {k: v for k, v in fam.options.items() if isinstance(v, int | float | str)},
         },
         "rounds": res.history,
+        "pruning": res.pruning,
         "timing": {"seconds": time.perf_counter() - t_start},
     }
     say(

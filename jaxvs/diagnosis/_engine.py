@@ -423,6 +423,7 @@ class SearchResult:
     null_gaps: list[float] = dataclasses.field(default_factory=list)
     not_identifiable: str | None = None
     primary: str | None = None
+    pruning: list[dict[str, Any]] = dataclasses.field(default_factory=list)
 
 
 # ------------------------------------------------------------------------------ search
@@ -770,8 +771,147 @@ def search(
             say("the remaining gap is within the noise floor: stopping")
             break
 
+    pruning: list[dict[str, Any]] = []
+    if len(model.effects) >= 2:
+        say("testing every accepted effect against the final model without it")
+        model, res_all, pruning = _prune(
+            model,
+            res_all,
+            exps,
+            n_cal_exp,
+            scale,
+            max_steps,
+            layout,
+            accepted,
+            candidates,
+            specs,
+            nominal_residuals,
+            min_shrink=min_shrink,
+            min_delta_bic=min_delta_bic,
+            n_boot=n_boot,
+            seed=seed,
+            say=say,
+        )
     primary = primary_effect(accepted, candidates)
-    return result(noise_floor=noise_floor, null_gaps=null_gaps, primary=primary)
+    return result(
+        noise_floor=noise_floor,
+        null_gaps=null_gaps,
+        primary=primary,
+        final=model,
+        final_residuals=list(res_all),
+        pruning=pruning,
+    )
+
+
+def _prune(
+    model: GapModel,
+    res_all: list[np.ndarray],
+    exps: list[Experiment],
+    n_cal_exp: int,
+    scale: float,
+    max_steps: int,
+    layout: Layout,
+    accepted: list[str],
+    candidates: dict[str, CandidateResult],
+    specs: Mapping[str, EffectSpec],
+    nominal_residuals: Sequence[np.ndarray],
+    *,
+    min_shrink: float,
+    min_delta_bic: float,
+    n_boot: int,
+    seed: int,
+    say: Callable[[str], None],
+) -> tuple[GapModel, list[np.ndarray], list[dict[str, Any]]]:
+    """Backward elimination after the greedy search: every effect of the final model must
+    pass the acceptance tests against the final model *without it* (recalibrated), not only
+    against the model it was added to. The greedy order can admit an effect that stands in
+    for a later one (an ambient temperature acting as a lag before the lag itself is in);
+    once the later effect is in, the proxy no longer earns its place. While some effect
+    fails, the one with the smallest held-out reduction is removed (with the base it had
+    replaced) and the rest are tested again. The drop-one reduction of every effect kept
+    becomes what it `explained` (the primary effect is the largest). Mutates `accepted`
+    and `candidates`; returns the model, its residuals and one record per test."""
+    y_val = np.concatenate([e.y for e in exps[n_cal_exp:]])
+    y_cal_all = [e.y for e in exps[:n_cal_exp]]
+    n_cal = int(sum(e.n for e in exps[:n_cal_exp]))
+    records: list[dict[str, Any]] = []
+    while len(model.effects) >= 2:
+        e_full = np.concatenate(res_all[n_cal_exp:])
+        r_cal = np.concatenate(res_all[:n_cal_exp])
+        ssr_full = float(np.sum(r_cal**2))
+        dof_full = _dof(model, exps[:n_cal_exp])
+        n_eff = effective_samples(r_cal)
+        tests = []
+        for eff in model.effects:
+            reduced = GapModel(model.nominal, tuple(e for e in model.effects if e is not eff))
+            (fitted,), _, _, (pred,) = fit_many(
+                [reduced], [None], exps, n_cal_exp, scale, max_steps, layout
+            )
+            r_red = [e.y - p for e, p in zip(exps, pred)]
+            e_red = np.concatenate(r_red[n_cal_exp:])
+            g0, g1, shrink, d_int, _ = gap_change_interval(
+                e_red, e_full, y_val, length=block_length(e_red), n_boot=n_boot, seed=seed
+            )
+            ssr_red = float(sum(np.sum((y - p) ** 2) for y, p in zip(y_cal_all, pred)))
+            dbic = bic_effective(ssr_red, n_cal, _dof(fitted, exps[:n_cal_exp]), n_eff) - (
+                bic_effective(ssr_full, n_cal, dof_full, n_eff)
+            )
+            threshold = candidates[eff.name].null_threshold or 0.0
+            reduction = g0 - g1
+            why = None
+            if not (d_int[0] > 0):
+                why = "held-out reduction not significant (bootstrap interval includes zero)"
+            elif shrink < min_shrink:
+                why = f"shrink below {min_shrink:g}"
+            elif not dbic > min_delta_bic:
+                why = f"ΔBIC (effective sample size) not above {min_delta_bic:g}"
+            elif not reduction > threshold:
+                why = (
+                    f"held-out reduction {reduction:.3g} not above its null threshold "
+                    f"{threshold:.3g}"
+                )
+            tests.append((eff.name, reduction, why, fitted, r_red))
+            records.append(
+                {
+                    "effect": eff.name,
+                    "effects": list(model.effect_names),
+                    "gap_without": g0,
+                    "gap_with": g1,
+                    "reduction": reduction,
+                    "reduction_interval": list(d_int),
+                    "shrink": shrink,
+                    "delta_bic": dbic,
+                    "null_threshold": threshold,
+                    "kept": why is None,
+                    "rejected_by": why,
+                }
+            )
+        failing = [t for t in tests if t[2] is not None]
+        if not failing:
+            for name, reduction, _, _, _ in tests:
+                candidates[name].explained = reduction
+                base = specs[name].extends
+                if base is not None and base in candidates:
+                    candidates[base].explained = 0.0
+            break
+        name, _, why, fitted, r_red = min(failing, key=lambda t: t[1])
+        say(f"removing {name}: without it, the final model loses nothing it must keep ({why})")
+        removed = [name]
+        while specs[removed[-1]].extends in accepted:
+            removed.append(specs[removed[-1]].extends)
+        for n in removed:
+            accepted.remove(n)
+            c = candidates[n]
+            c.accepted = False
+            c.explained = 0.0
+            c.rejected_by = f"removed after the search, tested against the final model: {why}"
+        model, res_all = fitted, r_red
+    if len(model.effects) == 1 and records:
+        # one effect left: what it explains is its reduction of the nominal held-out gap
+        g_nom = nrmse(np.concatenate(list(nominal_residuals[n_cal_exp:])), y_val)
+        g_fin = nrmse(np.concatenate(res_all[n_cal_exp:]), y_val)
+        candidates[model.effects[0].name].explained = g_nom - g_fin
+    return model, res_all, records
 
 
 def zip_effects(start: GapModel, fitted: GapModel):

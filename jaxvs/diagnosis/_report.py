@@ -29,7 +29,10 @@ class DiagnosisReport:
     `null_threshold`, `rejected_by`), `verdict` (`effects` in the order added,
     `final_effects`, `primary`, `validation_gap`, `shrink`, `shrink_interval`, `adequate`;
     `None` when the record cannot identify the nominal model), `not_identifiable` (the
-    reason, or `None`), `nominal`, `data`, `rounds`, `timing`. See `to_json()`.
+    reason, or `None`), `nominal`, `data`, `rounds`, `pruning` (every effect of the final
+    model tested against the final model without it: `effect`, `effects`, `gap_without`,
+    `gap_with`, `reduction`, `reduction_interval`, `shrink`, `delta_bic`,
+    `null_threshold`, `kept`, `rejected_by`), `timing`. See `to_json()`.
 
     **Fields (Python only):** `nominal_model`, `final_model` (`GapModel`s),
     `calibration`, `validation` (`Experiment`s), `predictions` (per experiment, nominal
@@ -183,6 +186,7 @@ class DiagnosisReport:
                 f"{shr} | {dbic} | {null} | {adm} | {acc} | {par} |"
             )
         lines += _rounds_markdown(c.get("rounds") or [])
+        lines += _pruning_markdown(c.get("pruning") or [])
         lines += ["", f"Run time: {c['timing']['seconds']:.1f} s.", ""]
         if c.get("figures"):
             lines += ["## Figures", ""] + [f"![{f}]({f})" for f in c["figures"]] + [""]
@@ -260,4 +264,27 @@ def _rounds_markdown(rounds: list[dict[str, Any]]) -> list[str]:
                 f"{_num(t.get('null_threshold'))} | {adm} | {passes} | {par} |"
             )
         lines.append("")
+    return lines
+
+
+def _pruning_markdown(pruning: list[dict[str, Any]]) -> list[str]:
+    """The backward-elimination tests: each accepted effect against the final model
+    without it."""
+    if not pruning:
+        return []
+    lines = [
+        "",
+        "## Every effect against the final model without it",
+        "",
+        "| effect | model | gap without → with | reduction [95 % CI] | ΔBIC | kept |",
+        "|---|---|---|---|---|---|",
+    ]
+    for p in pruning:
+        lo, hi = p["reduction_interval"]
+        kept = "**yes**" if p["kept"] else f"no: {p['rejected_by']}"
+        lines.append(
+            f"| {p['effect']} | {', '.join(p['effects'])} | {100 * p['gap_without']:.2f} % → "
+            f"{100 * p['gap_with']:.2f} % | {100 * p['reduction']:.3f} % "
+            f"[{100 * lo:.3f}, {100 * hi:.3f}] | {_num(p['delta_bic'], '.1f')} | {kept} |"
+        )
     return lines

@@ -200,7 +200,14 @@ class _MeasuredTemperature(AbstractAdditiveEffect):
         return check(
             (np.isfinite(c), "non-finite coefficient"),
             (
-                abs(c) <= 1.0,
+                c >= 0.0,
+                f"coefficient {c:.3g} < 0: through passive heat paths a temperature acts on "
+                "the bearing with a non-negative weight (eliminating the unmeasured nodes of "
+                "a conductance network, Kron reduction, keeps every conductance >= 0); a "
+                "negative weight stands in for a lag or another missing effect",
+            ),
+            (
+                c <= 1.0,
                 f"coefficient {c:.3g}: a passive heat path cannot amplify a temperature change",
             ),
         )
