@@ -447,8 +447,12 @@ class ExternalForce(AbstractEffect):
     `detect_events` in the residual of the model without this effect, on every
     experiment); the amplitudes are profiled out by least squares against the remaining
     force error of each experiment (variable projection), since an unmeasured disturbance
-    cannot be predicted from one experiment to the next. The information criterion counts
-    three parameters per event (start, end, amplitude).
+    cannot be predicted from one experiment to the next. An experiment with events also
+    carries a column of ones (`events_level`): where unmeasured forces switch on and off,
+    the level between the events is unknown too (a load may be on at the start of the
+    record, so the median the events are found against is not zero force), and a load
+    applied in one experiment does not carry over to the next. The information criterion
+    counts three parameters per event (start, end, amplitude) and one per level.
     """
 
     name: ClassVar[str] = "external_force"
@@ -466,7 +470,13 @@ class ExternalForce(AbstractEffect):
         return self
 
     def extra_dof(self, arrays: Sequence[Mapping[str, Array]]) -> int:
-        return 3 * sum(int(np.sum(np.any(np.asarray(d["events"]) != 0, axis=0))) for d in arrays)
+        dof = 0
+        for d in arrays:
+            ev = np.asarray(d["events"])
+            used = np.any(ev != 0, axis=0)
+            level = np.all(ev == 1, axis=0)
+            dof += 3 * int(np.sum(used & ~level)) + int(np.sum(level))
+        return dof
 
     def admissible(self, context):
         # the events are found in the data; with none, the effect is the nominal model
@@ -597,14 +607,25 @@ MAX_EVENTS = 16
 
 
 def detect_events(
-    residual: np.ndarray, dt: float, *, window_s: float = 0.05, threshold: float = 5.0
+    residual: np.ndarray,
+    dt: float,
+    *,
+    window_s: float = 0.05,
+    threshold: float = 5.0,
+    moving: np.ndarray | None = None,
 ) -> np.ndarray:
     """Columns of unit pulses where the smoothed residual stays far from zero.
 
     The residual is smoothed by a moving average of `window_s`; samples beyond `threshold`
     robust standard deviations (MAD of the smoothed residual) form events, merged when
-    closer than one window and dropped when shorter than one window. Returns
-    `(n, MAX_EVENTS)`, unused columns zero.
+    closer than one window and dropped when shorter than one window. With `moving` (a
+    boolean mask of the samples where the axis moves), an event must also act on the
+    moving axis for at least one window: a force that appears while the axis stands still
+    is balanced by static friction, which can take any value up to the breakaway level,
+    so it is not observable as an unmeasured force (the held force of a sticking axis
+    would otherwise be taken for one). Returns `(n, MAX_EVENTS)` with at most
+    `MAX_EVENTS − 1` events (the last column is left for `ExternalForce`'s level), unused
+    columns zero.
     """
     e = np.asarray(residual, float)
     w = max(1, int(round(window_s / dt)))
@@ -624,12 +645,15 @@ def detect_events(
                 starts.append(b)
         ends.append(idx[-1])
         for s0, s1 in zip(starts, ends):
-            if s1 - s0 + 1 >= w:
-                col = np.zeros(e.size)
-                col[s0 : s1 + 1] = 1.0
-                cols.append(col)
+            if s1 - s0 + 1 < w:
+                continue
+            if moving is not None and int(np.sum(moving[s0 : s1 + 1])) < w:
+                continue
+            col = np.zeros(e.size)
+            col[s0 : s1 + 1] = 1.0
+            cols.append(col)
     out = np.zeros((e.size, MAX_EVENTS))
-    for k, col in enumerate(cols[:MAX_EVENTS]):
+    for k, col in enumerate(cols[: MAX_EVENTS - 1]):
         out[:, k] = col
     return out
 
@@ -917,8 +941,15 @@ class DriveFamily(AbstractFamily):
 
 
 def _refresh_events(exp: Experiment, residual: np.ndarray) -> Experiment:
-    """Attach the event columns of the external-force candidate to an experiment."""
-    ev = detect_events(residual, exp.dt)
+    """Attach the event columns of the external-force candidate to an experiment: the
+    pulses `detect_events` finds while the axis moves (the same standstill threshold as
+    the operating-point cells, 2 % of the largest speed) and, when there is at least one,
+    a last column of ones for the unknown level between them (`ExternalForce`)."""
+    v = np.asarray(exp.arrays["v"])
+    moving = np.abs(v) > 0.02 * float(np.max(np.abs(v)))
+    ev = detect_events(residual, exp.dt, moving=moving)
+    if np.any(ev != 0):
+        ev[:, -1] = 1.0
     return dataclasses.replace(exp, arrays={**exp.arrays, "events": ev})
 
 
