@@ -12,9 +12,12 @@ import numpy as np
 
 from jaxvs.data import Record
 from jaxvs.diagnosis._drive import (
+    AsymmetricFrictionEffect,
+    CoulombEffect,
     DriveFamily,
     ExternalForce,
     RigidNominal,
+    StribeckEffect,
     _refresh_events,
     detect_events,
 )
@@ -172,3 +175,66 @@ def test_a_switched_load_on_most_of_the_time_is_explained_with_its_level():
     # identity without events (the nominal model at zero size)
     d = {**exps[1].jax_arrays(), "events": jnp.zeros_like(exps[1].jax_arrays()["events"])}
     assert np.allclose(np.asarray(ext.apply(nom(d), d, nom)), np.asarray(nom(d)))
+
+
+def _rest_errors(Fc, Fs, effects):
+    """RMS force errors [N] at rest of each effect in `effects` (callables `vmax ->
+    effect`) on `_held_axis` with sliding level `Fc` and breakaway `Fs`, with the true
+    rigid axis as the nominal model; and the largest change each makes while sliding."""
+    exp = DriveFamily().prepare(_held_axis(7200, lambda t: 0.0, Fc=Fc, Fs=Fs), "cal")
+    d = exp.jax_arrays()
+    nom = RigidNominal(jnp.asarray(12.0), jnp.asarray(40.0), jnp.asarray(3.0))
+    y0 = np.asarray(nom(d))
+    v = np.abs(exp.arrays["v"])
+    vmax = float(v.max())
+    # deep rest, 40 ms (the analysis filter's settling) away from any motion
+    moving = np.convolve((v > 1e-4 * vmax).astype(float), np.ones(41), mode="same") > 0
+    rest = ~moving
+    assert rest.mean() > 0.1  # the dwells are a fifth of the record
+    out = []
+    for make in effects:
+        eff = make(vmax)
+        y = np.asarray(eff.apply(jnp.asarray(y0), d, nom))
+        law = y0 + np.asarray(eff.contribution(d, nom))
+        sliding = v > 10 * float(eff.vs)
+        out.append(
+            (
+                float(np.sqrt(np.mean((exp.y - y)[rest] ** 2))),
+                float(np.max(np.abs(y - law)[sliding])),
+            )
+        )
+    return out
+
+
+def test_friction_holds_the_axis_at_rest_up_to_its_static_level():
+    """A friction law is set-valued at zero velocity: at rest the axis is held by whatever
+    force balances it, up to the static level. With the true levels, the Coulomb effect
+    predicts the held forces of a Coulomb plant (all within ±Fc) at rest to the force
+    noise (0.3 N white, bound 1 N), and leaves the sliding law untouched (the rest weight
+    `exp(−(v/v_s)²)` is below 1e-40 beyond 10 v_s); with a breakaway level above the
+    sliding one, only the Stribeck effect (held forces up to ±Fs) does."""
+
+    def coulomb(fc):
+        return lambda vmax: CoulombEffect(jnp.array([fc]), jnp.asarray(2e-3 * vmax))
+
+    def stribeck(fc, fs):
+        return lambda vmax: StribeckEffect(
+            jnp.array([fc, fs]), jnp.asarray(0.02 * vmax), jnp.asarray(2e-3 * vmax)
+        )
+
+    def asymmetric(fp, fn):
+        return lambda vmax: AsymmetricFrictionEffect(
+            jnp.array([fp, fn, 0.0]), jnp.asarray(2e-3 * vmax)
+        )
+
+    (c, c_slide), (a, a_slide), (zero, _) = _rest_errors(
+        20.0, 20.0, [coulomb(20.0), asymmetric(20.0, 20.0), coulomb(0.0)]
+    )
+    # the held forces are uniform in ±20 N: 11.5 N RMS when nothing holds the axis
+    assert zero > 8.0
+    assert c < 1.0 and a < 1.0
+    assert c_slide < 1e-6 and a_slide < 1e-6
+    (c, _), (s, s_slide) = _rest_errors(20.0, 40.0, [coulomb(20.0), stribeck(20.0, 40.0)])
+    # held forces up to ±40 N: beyond ±20 N the Coulomb level cannot hold them
+    assert c > 4.0
+    assert s < 1.0 and s_slide < 1e-6
