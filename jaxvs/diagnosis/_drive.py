@@ -19,8 +19,14 @@ Each candidate effect is a differentiable augmentation that is zero at zero size
 | `external_force` | force pulses at events found in the residual (amplitude per event) |
 | `position_dependence` | `Σ c_k P_k(q̄) + A·sin(2πq/p) + B·cos(2πq/p)` (Legendre + ripple of pitch `p`) |
 
-Friction extensions (asymmetric, Stribeck) contain Coulomb friction and replace it when
-they are added after it. Every effect states its physical admissibility
+Every friction effect is set-valued at rest, as friction is (Karnopp): an axis at rest is
+held by whatever friction force balances the applied force, up to the static level
+(`Fc`, `Fc±`, `Fs`), so at rest the force is predicted as the measured one projected onto
+that band (`_held`); a static level above the sliding one shows as held forces beyond
+`±Fc`. Friction extensions (asymmetric, Stribeck) contain Coulomb friction and replace it
+when they are added after it. External-force events are only found while the axis moves
+(at rest static friction carries any force), and each record with events gets its own
+level. Every effect states its physical admissibility
 (`admissible(context)`); the family states when a record identifies the rigid axis
 (`identifiability`) and simulates the effect-free null records of the recorded set-up
 (`null_experiments`: the closed loop with the controller identified from the record, or
@@ -98,9 +104,23 @@ def _ok(x) -> bool:
     return bool(np.all(np.isfinite(np.asarray(x))))
 
 
-class CoulombEffect(AbstractAdditiveEffect):
+def _held(y, d, negative, positive, vs):
+    """The prediction `y` (with the sliding friction law) completed at rest: a friction
+    law is set-valued at zero velocity -- an axis at rest is held by whatever friction
+    force balances the applied force, up to the static level of each direction (Karnopp
+    1985; Armstrong-Hélouvry et al. 1994, §2) -- so at rest the force is predicted as the
+    measured one projected onto `[−negative, positive]` around `y`. The rest weight
+    `exp(−(q̇/v_s)²)` is 1 at rest and vanishes once the axis slides (`v_s` the
+    sharpness of the sign law)."""
+    rest = jnp.exp(-jnp.square(d["v"] / vs))
+    held = jnp.clip(d["y"] - y, -jnp.abs(negative), jnp.abs(positive))
+    return y + rest * held
+
+
+class CoulombEffect(AbstractEffect):
     """Dry friction of constant level, the library's `jaxvs.models.CoulombFriction`
-    (`Fc·tanh(q̇/v_s)`, sharpness `v_s` fixed)."""
+    (`Fc·tanh(q̇/v_s)`, sharpness `v_s` fixed) while sliding; at rest it holds the axis
+    with any force up to `±Fc` (`_held`)."""
 
     name: ClassVar[str] = "coulomb_friction"
     order: ClassVar[int] = 0
@@ -111,6 +131,9 @@ class CoulombEffect(AbstractAdditiveEffect):
         # the library law on the velocity in units of the sharpness (`v/v_s`, sharpness 1):
         # `v_s` stays an array, so starts of several sharpnesses share one structure
         return models.CoulombFriction(self.size[0], velocity_scale=1.0)(d["v"] / self.vs)
+
+    def apply(self, y, d, nominal):
+        return _held(y + self.contribution(d, nominal), d, self.size[0], self.size[0], self.vs)
 
     def constrained(self):
         return eqx.tree_at(lambda e: e.vs, self, replace_fn=fixed)
@@ -126,10 +149,11 @@ class CoulombEffect(AbstractAdditiveEffect):
         return {"Fc": _f(self.size[0]), "v_s": _f(self.vs)}
 
 
-class AsymmetricFrictionEffect(AbstractAdditiveEffect):
+class AsymmetricFrictionEffect(AbstractEffect):
     """Direction-dependent Coulomb and viscous friction, the library's
     `jaxvs.models.AsymmetricFriction` (Janot et al. 2019, eq. 12) with levels `Fc+`,
-    `Fc−` and viscous coefficients `±ΔFv/2` on top of the nominal `Fv`."""
+    `Fc−` and viscous coefficients `±ΔFv/2` on top of the nominal `Fv`; at rest it holds
+    the axis with any force in `[−Fc−, Fc+]` (`_held`)."""
 
     name: ClassVar[str] = "asymmetric_friction"
     order: ClassVar[int] = 0
@@ -141,6 +165,10 @@ class AsymmetricFrictionEffect(AbstractAdditiveEffect):
         h = 0.5 * dfv * self.vs  # viscous coefficients per unit of v/v_s
         law = models.AsymmetricFriction(fp, h, fn, -h, velocity_scale=1.0)
         return law(d["v"] / self.vs)
+
+    def apply(self, y, d, nominal):
+        y = y + self.contribution(d, nominal)
+        return _held(y, d, self.size[1], self.size[0], self.vs)
 
     def constrained(self):
         return eqx.tree_at(lambda e: e.vs, self, replace_fn=fixed)
@@ -167,10 +195,11 @@ class AsymmetricFrictionEffect(AbstractAdditiveEffect):
         return {"Fc_pos": fp, "Fc_neg": fn, "dFv": dfv, "v_s": _f(self.vs)}
 
 
-class StribeckEffect(AbstractAdditiveEffect):
+class StribeckEffect(AbstractEffect):
     """Friction falling from a static level `Fs` to the Coulomb level `Fc` over the
     Stribeck speed, the library's `jaxvs.models.StribeckFriction` (Armstrong-Hélouvry
-    et al. 1994, eq. 5)."""
+    et al. 1994, eq. 5); at rest it holds the axis with any force up to the static
+    level `±Fs` (`_held`)."""
 
     name: ClassVar[str] = "stribeck_friction"
     order: ClassVar[int] = 0
@@ -185,6 +214,9 @@ class StribeckEffect(AbstractAdditiveEffect):
         ratio = jnp.where(jnp.isfinite(ratio), jnp.maximum(ratio, 1e-12), 1.0)
         law = models.StribeckFriction(self.size[0], self.size[1], ratio, velocity_scale=1.0)
         return law(d["v"] / self.vs)
+
+    def apply(self, y, d, nominal):
+        return _held(y + self.contribution(d, nominal), d, self.size[1], self.size[1], self.vs)
 
     def constrained(self):
         e = eqx.tree_at(lambda e: e.vs, self, replace_fn=fixed)
@@ -447,8 +479,12 @@ class ExternalForce(AbstractEffect):
     `detect_events` in the residual of the model without this effect, on every
     experiment); the amplitudes are profiled out by least squares against the remaining
     force error of each experiment (variable projection), since an unmeasured disturbance
-    cannot be predicted from one experiment to the next. The information criterion counts
-    three parameters per event (start, end, amplitude).
+    cannot be predicted from one experiment to the next. An experiment with events also
+    carries a column of ones (`events_level`): where unmeasured forces switch on and off,
+    the level between the events is unknown too (a load may be on at the start of the
+    record, so the median the events are found against is not zero force), and a load
+    applied in one experiment does not carry over to the next. The information criterion
+    counts three parameters per event (start, end, amplitude) and one per level.
     """
 
     name: ClassVar[str] = "external_force"
@@ -466,7 +502,13 @@ class ExternalForce(AbstractEffect):
         return self
 
     def extra_dof(self, arrays: Sequence[Mapping[str, Array]]) -> int:
-        return 3 * sum(int(np.sum(np.any(np.asarray(d["events"]) != 0, axis=0))) for d in arrays)
+        dof = 0
+        for d in arrays:
+            ev = np.asarray(d["events"])
+            used = np.any(ev != 0, axis=0)
+            level = np.all(ev == 1, axis=0)
+            dof += 3 * int(np.sum(used & ~level)) + int(np.sum(level))
+        return dof
 
     def admissible(self, context):
         # the events are found in the data; with none, the effect is the nominal model
@@ -597,14 +639,25 @@ MAX_EVENTS = 16
 
 
 def detect_events(
-    residual: np.ndarray, dt: float, *, window_s: float = 0.05, threshold: float = 5.0
+    residual: np.ndarray,
+    dt: float,
+    *,
+    window_s: float = 0.05,
+    threshold: float = 5.0,
+    moving: np.ndarray | None = None,
 ) -> np.ndarray:
     """Columns of unit pulses where the smoothed residual stays far from zero.
 
     The residual is smoothed by a moving average of `window_s`; samples beyond `threshold`
     robust standard deviations (MAD of the smoothed residual) form events, merged when
-    closer than one window and dropped when shorter than one window. Returns
-    `(n, MAX_EVENTS)`, unused columns zero.
+    closer than one window and dropped when shorter than one window. With `moving` (a
+    boolean mask of the samples where the axis moves), an event must also act on the
+    moving axis for at least one window: a force that appears while the axis stands still
+    is balanced by static friction, which can take any value up to the breakaway level,
+    so it is not observable as an unmeasured force (the held force of a sticking axis
+    would otherwise be taken for one). Returns `(n, MAX_EVENTS)` with at most
+    `MAX_EVENTS − 1` events (the last column is left for `ExternalForce`'s level), unused
+    columns zero.
     """
     e = np.asarray(residual, float)
     w = max(1, int(round(window_s / dt)))
@@ -624,12 +677,15 @@ def detect_events(
                 starts.append(b)
         ends.append(idx[-1])
         for s0, s1 in zip(starts, ends):
-            if s1 - s0 + 1 >= w:
-                col = np.zeros(e.size)
-                col[s0 : s1 + 1] = 1.0
-                cols.append(col)
+            if s1 - s0 + 1 < w:
+                continue
+            if moving is not None and int(np.sum(moving[s0 : s1 + 1])) < w:
+                continue
+            col = np.zeros(e.size)
+            col[s0 : s1 + 1] = 1.0
+            cols.append(col)
     out = np.zeros((e.size, MAX_EVENTS))
-    for k, col in enumerate(cols[:MAX_EVENTS]):
+    for k, col in enumerate(cols[: MAX_EVENTS - 1]):
         out[:, k] = col
     return out
 
@@ -917,8 +973,15 @@ class DriveFamily(AbstractFamily):
 
 
 def _refresh_events(exp: Experiment, residual: np.ndarray) -> Experiment:
-    """Attach the event columns of the external-force candidate to an experiment."""
-    ev = detect_events(residual, exp.dt)
+    """Attach the event columns of the external-force candidate to an experiment: the
+    pulses `detect_events` finds while the axis moves (the same standstill threshold as
+    the operating-point cells, 2 % of the largest speed) and, when there is at least one,
+    a last column of ones for the unknown level between them (`ExternalForce`)."""
+    v = np.asarray(exp.arrays["v"])
+    moving = np.abs(v) > 0.02 * float(np.max(np.abs(v)))
+    ev = detect_events(residual, exp.dt, moving=moving)
+    if np.any(ev != 0):
+        ev[:, -1] = 1.0
     return dataclasses.replace(exp, arrays={**exp.arrays, "events": ev})
 
 
