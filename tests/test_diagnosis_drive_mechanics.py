@@ -12,6 +12,9 @@ import scipy.signal as ss
 from jaxvs.diagnosis._base import AdmissibilityContext
 from jaxvs.diagnosis._drive import Backlash, PositionForceEffect, TimeDelay
 
+# a 1 kHz record of a 25 kg axis with a 1 µm encoder over 0.2 m, analysed up to 100 Hz
+AXIS = AdmissibilityContext(1e-3, 2.5e-3, (0.2, 100.0), 1e-6, span=0.2, nominal={"M": 25.0})
+
 
 def _columns(effect, arrays):
     """The effect's contribution for each unit size (its regressors)."""
@@ -121,14 +124,7 @@ def test_backlash_recovers_a_friction_loaded_gap():
 def test_backlash_terms_the_load_has_not_are_neither_fitted_nor_ruled():
     # a load carried by friction alone: its mass term is off, so a small value left in
     # the (unused) size is neither reported nor ruled inadmissible
-    ctx = AdmissibilityContext(
-        record_dt=1e-3,
-        analysis_dt=2.5e-3,
-        band_hz=(0.2, 100.0),
-        resolution=1e-6,
-        span=0.2,
-        nominal={"M": 25.0, "Fv": 40.0},
-    )
+    ctx = AXIS
     friction_only = jnp.array([0.0, 1.0])
     eff = Backlash(
         jnp.array([-0.2, 53.0]), jnp.asarray(1.3e-4), jnp.asarray(1e-3), friction_only, 2.5e-3
@@ -150,14 +146,7 @@ def test_backlash_terms_the_load_has_not_are_neither_fitted_nor_ruled():
 
 
 def test_a_friction_loaded_gap_within_the_presliding_range_is_not_a_backlash():
-    ctx = AdmissibilityContext(
-        record_dt=1e-3,
-        analysis_dt=2.5e-3,
-        band_hz=(0.2, 100.0),
-        resolution=1e-6,
-        span=0.2,
-        nominal={"M": 25.0, "Fv": 40.0},
-    )
+    ctx = AXIS
     vs, both = jnp.asarray(1e-3), jnp.ones(2)
     # a 9 µm gap behind which 40 N of friction act: presliding friction looks the same
     ok, why = Backlash(jnp.array([3.0, 40.0]), jnp.asarray(4.5e-6), vs, both, 2.5e-3).admissible(
