@@ -13,11 +13,11 @@ Each candidate effect is a differentiable augmentation that is zero at zero size
 | `coulomb_friction` | `jaxvs.models.CoulombFriction`: `Fc·tanh(q̇/v_s)` (sharpness `v_s` fixed) |
 | `asymmetric_friction` | `jaxvs.models.AsymmetricFriction`: levels `Fc+`, `Fc−` and viscous `±ΔFv/2` per direction |
 | `stribeck_friction` | `jaxvs.models.StribeckFriction`: `(Fc + (Fs − Fc)·exp(−(q̇/v_st)²))·tanh(q̇/v_s)` |
-| `backlash` | `m_L(q̈_L − q̈) + c_L(q̇_L − q̇) + F_L(s(q̇_L) − s(q̇))`, `q_L` = play of `q` (half gap `b`): a load with inertia and friction, unloaded while the gap is crossed |
+| `backlash` | `m_L(q̈_L − q̈) + F_L(s(q̇_L) − s(q̇))`, `q_L` = play of `q` (half gap `b`): a load with inertia and friction, unloaded while the gap is crossed |
 | `resonance` | `−s²/(s² + 2ζωs + ω²)·(m_r q̈ + c_r q̇)`: a load `m_r` on a spring-damper |
 | `time_delay` | the whole prediction advanced by `τ` (force acting `τ` after it is commanded) |
 | `external_force` | force pulses at events found in the residual (amplitude per event) |
-| `position_dependence` | `Σ c_k P_k(q̄) + A·sin(2πq/p) + B·cos(2πq/p)` (Legendre + ripple of pitch `p`) |
+| `position_dependence` | `Σ c_k P_k(q̄) + Σ_h A_h sin(2πhq/p) + B_h cos(2πhq/p)` (Legendre + ripple of pitch `p`, 2 harmonics) |
 
 Every friction effect is set-valued at rest, as friction is (Karnopp): an axis at rest is
 held by whatever friction force balances the applied force, up to the static level
@@ -65,10 +65,10 @@ from ._base import (
 )
 from ._stats import (
     difference_noise_sigma,
-    effective_samples,
     quantisation_step,
     white_noise_floor,
 )
+from ._tmf import fft_delay
 
 __all__ = ["DriveFamily", "RigidNominal"]
 
@@ -257,44 +257,68 @@ def _play(q: Array, b: Array) -> Array:
     return out
 
 
+def _motion(q: Array, dt: float) -> tuple[Array, Array]:
+    """Velocity and acceleration of a sampled position by central differences, smoothed
+    by `[1/4, 1/2, 1/4]` (the contact spring of a real axis spreads an impact over a few
+    samples)."""
+    kernel = jnp.array([0.25, 0.5, 0.25])
+    v = jnp.gradient(q, dt)
+    a = jnp.gradient(v, dt)
+    return jnp.convolve(v, kernel, mode="same"), jnp.convolve(a, kernel, mode="same")
+
+
 class Backlash(AbstractAdditiveEffect):
     """Play of total width `2b` between the motor and a load `m_L` carried by friction.
 
     The load follows the motor through the play operator, `q_L = play(q, b)`; while the
-    motor crosses the gap after a reversal it moves unloaded, so the load's inertia,
-    viscous and dry friction act with the load's motion, not the motor's:
-    `m_L (q̈_L − q̈) + c_L (q̇_L − q̇) + F_L (s(q̇_L) − s(q̇))`, `s` the smooth sign. A
-    load held by table friction (`F_L > 0`, a ball screw with its table) makes the force
-    drop by `F_L` during the crossing; a free inertial load (`F_L = 0`) makes the
-    re-engagement impact."""
+    motor crosses the gap after a reversal it moves unloaded, so the load's inertia and
+    dry friction act with the load's motion, not the motor's:
+    `m_L (q̈_L − q̈) + F_L (s(q̇_L) − s(q̇))`, `s` the smooth sign. A load held by table
+    friction (`F_L > 0`, a ball screw with its table) makes the force drop by `F_L` during
+    the crossing; a free inertial load (`F_L = 0`) makes the re-engagement impact. The
+    load's viscous friction is left in the nominal `Fv`: its correction acts only inside
+    the gap, near a reversal where the speed is low, so the record does not determine it
+    (left free, it trades with `F_L` and drives both to unphysical signs).
+
+    `terms` (fixed, 0 or 1 each) says which of `m_L`, `F_L` the load has: the starts
+    include a load carried by friction alone (`m_L = 0`: a table whose inertia does not
+    show when the gap is crossed slowly at a reversal) and a free inertial load
+    (`F_L = 0`), so that a term the record does not determine is not fitted to a small
+    unphysical value of the wrong sign."""
 
     name: ClassVar[str] = "backlash"
     order: ClassVar[int] = 0
-    size: Float[Array, 3]  # m_L [kg], c_L [N·s/m], F_L [N]
+    size: Float[Array, 2]  # m_L [kg], F_L [N]
     b: Any  # half gap [m], positive
     vs: Any  # sharpness of the load's sign law [m/s], fixed
+    terms: Any  # (2,) 1 where m_L, F_L act, 0 where the load has none; fixed
     dt: float = eqx.field(static=True)
 
     def contribution(self, d, nominal):
-        ql = _play(d["q"], self.b)
-        vl = jnp.gradient(ql, self.dt)
-        al = jnp.gradient(vl, self.dt)
-        # the contact spring of a real axis smooths the re-engagement over a few samples
-        kernel = jnp.array([0.25, 0.5, 0.25])
-        vl = jnp.convolve(vl, kernel, mode="same")
-        al = jnp.convolve(al, kernel, mode="same")
-        dry = jnp.tanh(vl / self.vs) - jnp.tanh(d["v"] / self.vs)
-        return self.size[0] * (al - d["a"]) + self.size[1] * (vl - d["v"]) + self.size[2] * dry
+        # the load's and the motor's motion through the same differentiation (and the
+        # same smoothing), so that the effect is exactly zero without a gap: the motor's
+        # `d["v"]`, `d["a"]` come from another differentiator (at the record rate), and
+        # the difference of two differentiators would be a free correction of q̈ that a
+        # "backlash" of zero gap buys on any record (its quantisation noise)
+        vl, al = _motion(_play(d["q"], self.b), self.dt)
+        vm, am = _motion(d["q"], self.dt)
+        dry = jnp.tanh(vl / self.vs) - jnp.tanh(vm / self.vs)
+        m, fl = self.size[0] * self.terms[0], self.size[1] * self.terms[1]
+        return m * (al - am) + fl * dry
 
     def constrained(self):
-        e = eqx.tree_at(lambda e: e.vs, self, replace_fn=fixed)
+        e = eqx.tree_at(lambda e: (e.vs, e.terms), self, replace_fn=fixed)
         return eqx.tree_at(lambda e: e.b, e, replace_fn=_pos)
+
+    def _sizes(self) -> tuple[float, float]:
+        m, fl = (float(x) for x in np.asarray(self.size) * np.asarray(self.terms))
+        return m, fl
 
     def extra_dof(self, arrays):
         return 0
 
     def admissible(self, context):
-        m, c, fl = (float(x) for x in np.asarray(self.size))
+        m, fl = self._sizes()
         gap = 2 * _f(self.b)
         res = context.resolution
         mass = float(context.nominal.get("M", np.inf))
@@ -305,16 +329,29 @@ class Backlash(AbstractAdditiveEffect):
                 f"gap {gap:.3g} m not above the position resolution {res:.3g} m",
             ),
             (gap < 0.1 * context.span, f"gap {gap:.3g} m not small against the travel"),
+            (
+                fl <= 0 or gap > PRESLIDING,
+                f"gap {gap:.3g} m with a load carried by friction is within the presliding "
+                f"range of dry friction ({PRESLIDING:.0e} m): friction that keeps its sign "
+                "for a few micrometres after a reversal (Dahl) looks the same",
+            ),
             (m >= 0, f"negative load mass m_L = {m:.4g} kg"),
             (m <= mass, f"load mass m_L = {m:.4g} kg above the whole moving mass {mass:.4g} kg"),
-            (c >= 0, f"negative load damping c_L = {c:.4g} N·s/m"),
             (fl >= 0, f"negative load friction F_L = {fl:.4g} N"),
             (m > 0 or fl > 0, "neither a load mass nor a load friction behind the gap"),
         )
 
     def parameters(self):
-        m, c, fl = (float(x) for x in np.asarray(self.size))
-        return {"gap": 2 * _f(self.b), "m_load": m, "c_load": c, "F_load": fl}
+        m, fl = self._sizes()
+        return {"gap": 2 * _f(self.b), "m_load": m, "F_load": fl}
+
+
+PRESLIDING = 20e-6
+"""Longest presliding displacement of dry friction the diagnosis expects [m] (heuristic:
+the elastic micro-displacement of rolling and sliding contacts before gross sliding is
+of the order of 1 to 20 µm; Al-Bender & Swevers 2008, *IEEE Control Systems* 28(6)).
+A friction-loaded gap shorter than it cannot be told from friction that keeps its sign
+for that distance after a reversal; an inertial gap (an impact) still can."""
 
 
 def _highpass2(x: Array, w: Array, z: Array, dt: float) -> Array:
@@ -390,7 +427,13 @@ about 0.3 a "mode" has no peak left in the force spectrum and only bends the pha
 
 
 class TimeDelay(AbstractEffect):
-    """The force acts `τ` after it is recorded: the whole prediction advanced by `τ`."""
+    """The force acts `τ` after it is recorded: the whole prediction advanced by `τ`.
+
+    The advance is band-limited (`fft_delay`: the phase of the spectrum turned by
+    `e^{iωτ}`), an all-pass operator like a real delay. A linear interpolation between
+    analysis samples would also low-pass the prediction by up to 22 % at the cut-off for a
+    quarter-sample shift, and that smoothing of the quantisation noise of `q̈` is a gain a
+    fitted "delay" buys on effect-free records."""
 
     name: ClassVar[str] = "time_delay"
     order: ClassVar[int] = 1
@@ -398,9 +441,7 @@ class TimeDelay(AbstractEffect):
     dt: float = eqx.field(static=True)
 
     def apply(self, y, d, nominal):
-        n = y.shape[0]
-        idx = jnp.arange(n, dtype=y.dtype)
-        return jnp.interp(idx + self.tau / self.dt, idx, y)
+        return fft_delay(y, -self.tau / self.dt)
 
     def constrained(self):
         return self
@@ -425,23 +466,27 @@ def _legendre(x: Array, degree: int) -> Array:
 
 
 class PositionForceEffect(AbstractAdditiveEffect):
-    """`Σ c_k P_k(q̄) + A·sin(2πq/p) + B·cos(2πq/p)`: a smooth force over the travel
-    (Legendre terms: gravity, a spring) plus a ripple of pitch `p` (cogging)."""
+    """`Σ c_k P_k(q̄) + Σ_h A_h·sin(2πhq/p) + B_h·cos(2πhq/p)`, `h = 1, 2`: a smooth
+    force over the travel (Legendre terms: gravity, a spring) plus a ripple of pitch `p`
+    and its second harmonic (cogging of a magnet pitch is a Fourier series in `q/p`,
+    rarely a pure sine). `q̄` maps the calibrated travel onto `[−1, 1]`; the smooth part
+    is known only there, so beyond it it keeps its value at the end of the travel (a
+    held-out record that travels elsewhere, e.g. an open loop drifting, would otherwise
+    see the cubic diverge); the ripple is periodic and continues as it is."""
 
     name: ClassVar[str] = "position_dependence"
     order: ClassVar[int] = 0
-    size: Float[Array, 5]  # 3 Legendre coefficients, sine and cosine of the ripple
+    size: Float[Array, 7]  # 3 Legendre coefficients, sine and cosine of 2 ripple harmonics
     pitch: Any  # positive [m]
     centre: float = eqx.field(static=True)
     half_range: float = eqx.field(static=True)
 
     def contribution(self, d, nominal):
         q = d["q"]
-        x = (q - self.centre) / self.half_range
+        x = jnp.clip((q - self.centre) / self.half_range, -1.0, 1.0)
         ph = 2 * jnp.pi * q / self.pitch
-        basis = jnp.concatenate(
-            [_legendre(x, 3), jnp.stack([jnp.sin(ph), jnp.cos(ph)], -1)], axis=-1
-        )
+        ripple = [jnp.sin(ph), jnp.cos(ph), jnp.sin(2 * ph), jnp.cos(2 * ph)]
+        basis = jnp.concatenate([_legendre(x, 3), jnp.stack(ripple, -1)], axis=-1)
         return basis @ self.size
 
     def constrained(self):
@@ -465,6 +510,7 @@ class PositionForceEffect(AbstractAdditiveEffect):
         s = np.asarray(self.size)
         return {
             "ripple_amplitude": float(np.hypot(s[3], s[4])),
+            "ripple_amplitude_2": float(np.hypot(s[5], s[6])),
             "ripple_pitch": _f(self.pitch),
             "legendre_1": float(s[0]),
             "legendre_2": float(s[1]),
@@ -552,7 +598,13 @@ def _t_stribeck(ctx: Context) -> list[AbstractEffect]:
 def _t_backlash(ctx: Context) -> list[AbstractEffect]:
     dt = ctx.experiments[0].dt
     vs = jnp.asarray(_vs_default(ctx))
-    return [Backlash(jnp.zeros(3), jnp.asarray(b), vs, dt) for b in (2e-5, 1.5e-4)]
+    # a load with inertia and friction, carried by friction alone, or inertial alone
+    terms = [(1.0, 1.0), (0.0, 1.0), (1.0, 0.0)]
+    return [
+        Backlash(jnp.zeros(2), jnp.asarray(b), vs, jnp.asarray(t), dt)
+        for b in (2e-5, 1.5e-4)
+        for t in terms
+    ]
 
 
 def _t_resonance(ctx: Context) -> list[AbstractEffect]:
@@ -603,7 +655,7 @@ def _t_position(ctx: Context) -> list[AbstractEffect]:
     spec[:3] = 0.0
     top = np.argsort(spec)[::-1][:2]
     pitches = [span / k for k in top if k > 0] + [span / 1.5]
-    return [PositionForceEffect(jnp.zeros(5), jnp.asarray(p), centre, half) for p in pitches]
+    return [PositionForceEffect(jnp.zeros(7), jnp.asarray(p), centre, half) for p in pitches]
 
 
 def _t_external(ctx: Context) -> list[AbstractEffect]:
@@ -789,7 +841,7 @@ class DriveFamily(AbstractFamily):
         """The rigid axis is identified when the motion goes both ways with at least two
         velocity reversals, the regressors `(q̈, q̇, 1)` are not collinear, and the
         calibrated mass is positive and determined to better than 25 % (four standard
-        errors from zero; Fisher information with the effective sample size of the
+        errors from zero; Fisher information with the white noise level of the
         residual) and the viscous friction is not negative."""
         v = np.concatenate([e.arrays["v"] for e in experiments])
         vm = float(np.max(np.abs(v)))
@@ -824,8 +876,11 @@ class DriveFamily(AbstractFamily):
         y = np.concatenate([e.y for e in experiments])
         pred = phi @ np.array([mass, fv, float(nom.offset)])
         e = y - pred
-        n_eff = effective_samples(e)
-        sigma2 = float(np.mean(e**2)) * y.size / max(n_eff, 1.0)
+        # Fisher information with the noise of the record (the white part of the
+        # residual, robust successive differences): the slow part of the residual is the
+        # unmodelled effect the search is there to explain (a position-dependent force
+        # makes it large and strongly correlated), not a lack of excitation
+        sigma2 = difference_noise_sigma(e) ** 2
         cov = sigma2 * np.linalg.pinv(phi.T @ phi)
         se_m = float(np.sqrt(max(cov[0, 0], 0.0)))
         if not mass > 0:
@@ -836,7 +891,7 @@ class DriveFamily(AbstractFamily):
         if se_m > 0.25 * mass:
             return (
                 f"the mass is not determined (M = {mass:.4g} ± {se_m:.2g} kg, one standard "
-                "error with the residual's correlation): excite the inertia more strongly"
+                "error with the record's noise level): excite the inertia more strongly"
             )
         if fv < 0:
             return (
