@@ -423,7 +423,17 @@ def main(argv=None) -> int:
         help="run the cases N at a time, each chunk in a fresh Python process (XLA's "
         "memory mappings grow with every compilation; one long process runs out of them)",
     )
+    p.add_argument(
+        "--merge",
+        nargs="+",
+        default=None,
+        metavar="JSON",
+        help="merge the blind_diagnosis.json of several runs (e.g. one per family) into "
+        "one report in --out; no case is run",
+    )
     args = p.parse_args(argv)
+    if args.merge:
+        return _merge(args.merge, pathlib.Path(args.out))
     if args.jobs < 1:
         raise SystemExit("--jobs must be >= 1")
     if args.cases is not None and args.cases < 1:
@@ -521,6 +531,36 @@ def _run_chunks(chosen, args, meta, out: pathlib.Path) -> int:
                 _print_row(r)
             write(rows, meta, out)
     print(write(rows, meta, out))
+    return 0
+
+
+def _merge(paths: list[str], out: pathlib.Path) -> int:
+    """One report from the JSON of several runs: their cases in benchmark order, each
+    part's commit, load average and case list kept in `meta["parts"]`."""
+    order = {c.name: i for i, c in enumerate(blind_plants.cases())}
+    rows: dict[str, dict] = {}
+    parts = []
+    for path in paths:
+        d = json.loads(pathlib.Path(path).read_text())
+        parts.append(
+            {"file": str(path), **{k: d["meta"].get(k) for k in ("commit", "load_average")}}
+        )
+        for r in d["cases"]:
+            rows[r["case"]] = r  # a later file wins for a case run twice
+    merged = sorted(rows.values(), key=lambda r: order.get(r["case"], len(order)))
+    commits = sorted({str(p["commit"]) for p in parts})
+    starts = [p["load_average"]["start"][0] for p in parts if p.get("load_average")]
+    meta = {
+        "machine": platform.platform(),
+        "cpu_count": os.cpu_count(),
+        "jax": jax.__version__,
+        "python": sys.version.split()[0],
+        "commit": ", ".join(commits),
+        "load_average": {"start": [max(starts) if starts else float("nan")] * 3},
+        "parts": parts,
+        "cases_planned": [r["case"] for r in merged],
+    }
+    print(write(merged, meta, out))
     return 0
 
 
