@@ -502,7 +502,8 @@ class ProcessForce(AbstractAdditiveEffect):
     from rest: `κ = 0` when the structure was at rest under the force acting then (a
     record that starts mid-cut), `κ = 1` when the force came on with the record (the
     structure unloaded before). The record does not say which, so `κ` is calibrated
-    (one value for all experiments of one set-up).
+    (one value for all experiments of one set-up), as `κ = 1 / (1 + e^{−θ})`: a share,
+    between 0 and 1 at every iterate (it starts at one half).
 
     The same poles as the TMF are exact for a lumped structure: `x_t − T x_e =
     (G_tf − T G_ef) f`, and by the Desnanot–Jacobi identity the numerator of this
@@ -513,11 +514,11 @@ class ProcessForce(AbstractAdditiveEffect):
     order: ClassVar[int] = 0
     size: Float[Array, " n1"]  # N(σ), highest power first, in units of g
     gain: Any  # g [m/N] = RMS(x_t) / RMS(f) of the calibration data; never calibrated
-    unbalanced: Any = 0.0  # κ [-]: share of the first force sample unbalanced at the start
+    unbalanced: Any = 0.0  # θ [-]: κ = sigmoid(θ), share of f(0) unbalanced at the start
 
     def contribution(self, d, nominal):
         a0 = nominal.scaled_denominator()[-1]
-        force = d["f"] + self.unbalanced * d["f0"]
+        force = d["f"] + jax.nn.sigmoid(self.unbalanced) * d["f0"]
         return nominal.simulate(force, num=self.gain * a0 * self.size)
 
     def constrained(self):
@@ -538,7 +539,7 @@ class ProcessForce(AbstractAdditiveEffect):
         out = {"static_compliance_m_per_N": _f(self.gain) * float(b[-1])}
         for i, bi in enumerate(b[::-1][1:], start=1):
             out[f"b{i}"] = float(bi)  # coefficient of σ^i (σ = s / w0), in units of g
-        out["unbalanced_share_at_start"] = _f(self.unbalanced)
+        out["unbalanced_share_at_start"] = 0.5 * (1 + math.tanh(0.5 * _f(self.unbalanced)))
         return out
 
 
