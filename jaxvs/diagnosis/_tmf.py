@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
@@ -300,61 +301,105 @@ def _positive(x) -> Positive:
     return Positive(jnp.log(jnp.maximum(x, 1e-12)))
 
 
-class TMFPositionEffect(AbstractAdditiveEffect):
-    """TMF coefficients linear in the other axis' position: `B(σ; y) = B₀(σ) + x·ΔB(σ)`,
-    `A(σ; y) = A₀(σ) + x·ΔA(σ)` (monic), `x = (y − ȳ)/h` with `ȳ`, `h` the centre and
-    half-range of the calibration positions.
+def _position_layout(n_size: int) -> tuple[int, int, int]:
+    """`(order + 1, sections, odd poles)` of the TMF behind a position effect's `size`
+    of `n_size` entries: `(2 order + 1)` slopes and `2 (order // 2)` curvatures."""
+    for order in range(1, 64):
+        if 2 * order + 1 + 2 * (order // 2) == n_size:
+            return order + 1, order // 2, order % 2
+    raise ValueError(f"position effect: {n_size} sizes fit no TMF order")
 
-    Linear coefficients are exact when a stiffness or mass of the structure changes
-    linearly with the position: the numerator and denominator of a TMF are cofactors of
-    the dynamic stiffness matrix, multilinear in its stiffnesses and masses.
+
+class TMFPositionEffect(AbstractAdditiveEffect):
+    """TMF parameters that change with the other axis' position `y`: the numerator
+    `B(σ)`, the log natural frequencies, log damping ratios (and the log real pole) of
+    the nominal TMF move by `x · slope`, and the log frequencies and dampings also by
+    `x² · curvature`, `x = (y − ȳ)/h` with `ȳ`, `h` the centre and half-range of the
+    calibration positions.
+
+    The modal form keeps the TMF stable at every position and every iterate (no root
+    of a moved polynomial can cross the imaginary axis); a mode frequency that changes
+    by a share per unit travel (a stiffness or an overhang length changing with the
+    position, `ω ∝ √(k/m)`) is linear in `log ω` to first order, and the curvature
+    holds a change that is not monotonic over the travel (a preload or a guide whose
+    stiffness peaks mid-travel). With two positions the curvature is not identified
+    (`x² = 1` at both: an extrapolation would amplify whatever it took from the
+    nominal model), so it acts only with three positions or more (`curved`).
     """
 
     name: ClassVar[str] = "position_dependence"
     order: ClassVar[int] = 0
-    size: Float[Array, " p"]  # (ΔB (order + 1), ΔA (order)) per half-range, scaled σ
+    # (ΔB (order + 1), Δlog ω, Δlog ζ, Δlog p) per half-range, then the curvatures
+    # (Δ²log ω, Δ²log ζ) per squared half-range
+    size: Float[Array, " p"]
     centre: Any  # ȳ [m]; never calibrated
     half_range: Any  # h [m]; never calibrated
+    curved: bool = eqx.field(static=True, default=True)  # three positions or more
 
     def constrained(self):
         return eqx.tree_at(lambda e: (e.centre, e.half_range), self, replace_fn=fixed)
 
+    def delta(self, x: Any) -> Array:
+        """The change of the nominal TMF's `flat()` parameters at `x` (half-ranges)."""
+        n1, ns, no = _position_layout(int(self.size.shape[0]))
+        p = n1 + 2 * ns + no
+        lin, curv = self.size[:p], self.size[p:]
+        zeros = jnp.zeros((n1,), self.size.dtype)
+        curv_full = jnp.concatenate([zeros, curv, jnp.zeros((no,), self.size.dtype)])
+        if not self.curved:
+            return x * lin
+        return x * lin + x * x * curv_full
+
     def contribution(self, d, nominal):
         x = (d["pos_y"][0] - self.centre) / self.half_range
-        n1 = nominal.num.shape[0]
-        delta = x * self.size
-        diff = nominal.simulate_shifted(d["x_e"], delta[:n1], delta[n1:]) - nominal(d)
-        # exactly zero at zero size (the polished roots differ from the nominal ones by
-        # rounding), with the derivative of `diff` kept
+        delta = self.delta(x)
+        diff = nominal.simulate(d["x_e"], delta=delta) - nominal(d)
         return _exact_zero_at(jnp.all(delta == 0), diff)
 
     def extra_dof(self, arrays):
-        return 0
+        # without curvature its entries of `size` are calibrated leaves that act on
+        # nothing: not degrees of freedom
+        n1, ns, no = _position_layout(int(self.size.shape[0]))
+        return 0 if self.curved else -2 * ns
 
     def admissible(self, context):
-        """The TMF stays stable over the measured positions (`x = ±1`)."""
+        """Finite values, and every mode of the TMF inside the analysed band over the
+        measured positions (`−1 ≤ x ≤ 1`): a mode that would leave it is not a position
+        dependence the records resolve."""
         s = np.asarray(self.size)
         nom = context.nominal_model
         if not np.all(np.isfinite(s)):
-            return False, "non-finite coefficient slopes"
+            return False, "non-finite parameter slopes"
         if nom is None:
             return True, None
-        n1 = int(nom.num.shape[0])
-        den = np.asarray(nom.scaled_denominator())
-        for x in (-1.0, 1.0):
-            d = den + np.concatenate([[0.0], x * s[n1:]])
-            if np.any(np.real(np.roots(d)) >= 0):
-                return False, f"the TMF is unstable at the {'lower' if x < 0 else 'upper'} end of y"
+        n1, ns, _ = _position_layout(s.size)
+        lo, hi = context.band_hz
+        for x in np.linspace(-1.0, 1.0, 21):
+            lw = np.asarray(nom.log_omega) + np.asarray(self.delta(x))[n1 : n1 + ns]
+            f = np.exp(lw) * nom.w0 / (2 * math.pi)
+            if np.any(f > hi) or np.any(f < lo):
+                end = {-1.0: "lower end", 1.0: "upper end"}.get(round(float(x), 6), "inside")
+                return False, (
+                    f"a mode leaves the analysed band [{lo:.3g}, {hi:.4g}] Hz at the {end} "
+                    f"of y (x = {x:+.1f}: f = {', '.join(f'{v:.4g}' for v in f)} Hz)"
+                )
         return True, None
 
     def parameters(self):
         s = np.asarray(self.size)
-        return {
+        n1, ns, no = _position_layout(s.size)
+        p = n1 + 2 * ns + no
+        out = {
             "y_centre": _f(self.centre),
             "y_half_range": _f(self.half_range),
-            "numerator_slope_norm": float(np.linalg.norm(s[: (s.size + 1) // 2])),
-            "denominator_slope_norm": float(np.linalg.norm(s[(s.size + 1) // 2 :])),
+            "numerator_slope_norm": float(np.linalg.norm(s[:n1])),
         }
+        for k in range(ns):  # sections in the nominal's order
+            # relative change from the centre to the upper end of the positions
+            out[f"mode_{k + 1}_frequency_change"] = float(np.expm1(s[n1 + k] + s[p + k]))
+            out[f"mode_{k + 1}_damping_change"] = float(np.expm1(s[n1 + ns + k] + s[p + ns + k]))
+            out[f"mode_{k + 1}_log_frequency_curvature"] = float(s[p + k])
+        return out
 
 
 class MissingMode(AbstractAdditiveEffect):
@@ -448,8 +493,17 @@ class SensorDelay(AbstractEffect):
 
 class ProcessForce(AbstractAdditiveEffect):
     """The measured process force `f` moves the tool relative to the encoder through a
-    compliance with the structure's poles: `+ g·A(0)·N(σ) / A(σ) · f`, `A` the nominal
-    TMF's denominator, `N(σ) = Σ b_i σ^i` the size; the static compliance is `g·b₀` [m/N].
+    compliance with the structure's poles: `+ g·A(0)·N(σ) / A(σ) · (f + b)`, `A` the
+    nominal TMF's denominator, `N(σ) = Σ b_i σ^i` the size; the static compliance is
+    `g·b₀` [m/N].
+
+    `f` is taken relative to its first sample (as `x_t` is), and `b = κ f(0)` is the
+    force not balanced by the structure's deflection at the record's start, applied
+    from rest: `κ = 0` when the structure was at rest under the force acting then (a
+    record that starts mid-cut), `κ = 1` when the force came on with the record (the
+    structure unloaded before). The record does not say which, so `κ` is calibrated
+    (one value for all experiments of one set-up), as `κ = 1 / (1 + e^{−θ})`: a share,
+    between 0 and 1 at every iterate (it starts at one half).
 
     The same poles as the TMF are exact for a lumped structure: `x_t − T x_e =
     (G_tf − T G_ef) f`, and by the Desnanot–Jacobi identity the numerator of this
@@ -460,10 +514,12 @@ class ProcessForce(AbstractAdditiveEffect):
     order: ClassVar[int] = 0
     size: Float[Array, " n1"]  # N(σ), highest power first, in units of g
     gain: Any  # g [m/N] = RMS(x_t) / RMS(f) of the calibration data; never calibrated
+    unbalanced: Any = 0.0  # θ [-]: κ = sigmoid(θ), share of f(0) unbalanced at the start
 
     def contribution(self, d, nominal):
         a0 = nominal.scaled_denominator()[-1]
-        return nominal.simulate(d["f"], num=self.gain * a0 * self.size)
+        force = d["f"] + jax.nn.sigmoid(self.unbalanced) * d["f0"]
+        return nominal.simulate(force, num=self.gain * a0 * self.size)
 
     def constrained(self):
         return eqx.tree_at(lambda e: e.gain, self, replace_fn=fixed)
@@ -473,7 +529,9 @@ class ProcessForce(AbstractAdditiveEffect):
 
     def admissible(self, context):
         # the compliance has the structure's own (stable) poles; its numerator is free
-        ok = bool(np.all(np.isfinite(np.asarray(self.size))))
+        ok = bool(np.all(np.isfinite(np.asarray(self.size)))) and bool(
+            np.isfinite(_f(self.unbalanced))
+        )
         return (True, None) if ok else (False, "non-finite compliance numerator")
 
     def parameters(self):
@@ -481,6 +539,7 @@ class ProcessForce(AbstractAdditiveEffect):
         out = {"static_compliance_m_per_N": _f(self.gain) * float(b[-1])}
         for i, bi in enumerate(b[::-1][1:], start=1):
             out[f"b{i}"] = float(bi)  # coefficient of σ^i (σ = s / w0), in units of g
+        out["unbalanced_share_at_start"] = 0.5 * (1 + math.tanh(0.5 * _f(self.unbalanced)))
         return out
 
 
@@ -509,13 +568,61 @@ def _residual_peaks(ctx: Context, k: int) -> list[float]:
 
 
 def _t_position(ctx: Context) -> list[AbstractEffect]:
+    """Two starts: no change, and the changes of the TMFs fitted to each position alone.
+
+    The second is the signature of a position dependence: a TMF initialised on each
+    calibration experiment by itself (the nominal model's own rational fit), its
+    parameters regressed on the position (a line, and a parabola in the log frequencies
+    and dampings when there are three positions or more). It starts the calibration near
+    a mode that moves by more than its bandwidth over the travel, where the mean TMF's
+    cost has no slope towards it."""
     ys = np.array([float(e.arrays["pos_y"][0]) for e in ctx.experiments])
     lo, hi = float(ys.min()), float(ys.max())
     half = max((hi - lo) / 2, 1e-12)
-    n1 = int(ctx.model.nominal.num.shape[0])
-    return [
-        TMFPositionEffect(jnp.zeros(2 * n1 - 1), jnp.asarray((lo + hi) / 2), jnp.asarray(half))
-    ]
+    centre = (lo + hi) / 2
+    nom = ctx.model.nominal
+    n_size = int(nom.flat().shape[0]) + 2 * int(nom.log_omega.shape[0])
+    zero = jnp.zeros((n_size,))
+    curved = np.unique(np.round(ys, 12)).size >= 3
+    starts = [TMFPositionEffect(zero, jnp.asarray(centre), jnp.asarray(half), curved)]
+    size = _position_start(ctx, (ys - centre) / half)
+    start = (
+        starts[0]
+        if size is None
+        else TMFPositionEffect(jnp.asarray(size), jnp.asarray(centre), jnp.asarray(half), curved)
+    )
+    return starts + [start]  # always two starts: one compilation
+
+
+def _position_start(ctx: Context, x: np.ndarray) -> np.ndarray | None:
+    """The position effect's `size` regressed from TMFs fitted to each calibration
+    experiment alone (in the nominal model's frequency scale, sections matched by
+    frequency rank); `None` when a fit has another structure than the nominal model (a
+    real pole pair instead of a section) or fails."""
+    nom = ctx.model.nominal
+    fam = TMFFamily(**ctx.options)
+    rank = np.argsort(np.asarray(nom.log_omega))
+    flats = []
+    for e in ctx.experiments:
+        try:
+            m = StableTMF.from_rational(fam.nominal([e]).tf(), nom.w0, nom.dt)
+        except (NotIdentifiable, ValueError, np.linalg.LinAlgError):
+            return None
+        if m.log_omega.shape != nom.log_omega.shape or m.log_pole.shape != nom.log_pole.shape:
+            return None
+        lw, lz = np.asarray(m.log_omega), np.asarray(m.log_zeta)
+        lw_m, lz_m = np.empty_like(lw), np.empty_like(lz)
+        lw_m[rank], lz_m[rank] = np.sort(lw), lz[np.argsort(lw)]
+        flats.append(np.concatenate([np.asarray(m.num), lw_m, lz_m, np.asarray(m.log_pole)]))
+    flats_a = np.stack(flats)
+    distinct = np.unique(np.round(x, 9)).size
+    if not np.all(np.isfinite(flats_a)) or distinct < 2:
+        return None
+    n1, ns = int(nom.num.shape[0]), int(nom.log_omega.shape[0])
+    cols = [np.ones_like(x), x] + ([x * x] if distinct >= 3 else [])
+    coef, *_ = np.linalg.lstsq(np.stack(cols, axis=1), flats_a, rcond=None)
+    curv = coef[2][n1 : n1 + 2 * ns] if distinct >= 3 else np.zeros(2 * ns)
+    return np.concatenate([coef[1], curv])
 
 
 def _t_mode(ctx: Context) -> list[AbstractEffect]:
@@ -544,7 +651,7 @@ def _t_force(ctx: Context) -> list[AbstractEffect]:
         return []
     gain = float(np.sqrt(np.mean(xt**2))) / fr
     n1 = int(ctx.model.nominal.num.shape[0])
-    return [ProcessForce(jnp.zeros(n1), jnp.asarray(gain))]
+    return [ProcessForce(jnp.zeros(n1), jnp.asarray(gain), jnp.asarray(0.0))]
 
 
 def _needs_positions(experiments: Sequence[Experiment]) -> str | None:
@@ -564,30 +671,106 @@ def _needs_force(experiments: Sequence[Experiment]) -> str | None:
 # ------------------------------------------------------------------------------ family
 
 
-def _fir_noise_var(xe: np.ndarray, xt: np.ndarray, f: np.ndarray | None, taps: int) -> float:
-    """Noise level of `x_t`: the residual variance of a long FIR regression on `x_e` (and
-    `f`), taps −3 … `taps` − 4, i.e. whatever a linear time-invariant map of the inputs
-    cannot explain (sensor noise, and encoder quantisation carried through the TMF). Solved
-    by the normal equations (Cholesky); the variance is corrected for the fitted
-    parameters, `SSR / (n − p)`."""
+def _fir_residual(
+    xe: np.ndarray,
+    xt: np.ndarray,
+    f: np.ndarray | None,
+    taps: int,
+    extra: np.ndarray | None = None,
+) -> tuple[np.ndarray, int] | None:
+    """Residual of a long FIR regression of `x_t` on `x_e` (and `f`), taps −3 … `taps` − 4,
+    plus optional regressor columns `extra` `(n, m)` aligned with `x_t`: whatever a linear
+    time-invariant map of the inputs cannot explain. Solved by the normal equations on
+    normalised columns. Returns the residual and the number of regressors, or `None` when
+    the record is too short for the regression."""
     n = xt.size
     lead = 3
     m = n - taps + 1  # windows of `taps` samples ending `lead` samples after k
     if m <= 4 * taps:
-        return float(np.var(xt)) * 1e-6
+        return None
     win = np.lib.stride_tricks.sliding_window_view
     cols = [win(xe, taps)]
     if f is not None:
         cols.append(win(f, taps))
+    start = taps - 1 - lead
+    # a constant: the record is taken relative to its first sample, which shifts its
+    # noise by that sample's noise (an offset, not noise)
+    cols.append(np.ones((m, 1)))
+    if extra is not None:
+        cols.append(np.asarray(extra)[start : start + m])
     phi = np.concatenate(cols, axis=1)  # row j: inputs j … j + taps − 1
-    y = xt[taps - 1 - lead : taps - 1 - lead + m]
+    y = xt[start : start + m]
     scale = np.sqrt(np.mean(phi**2, axis=0)) + 1e-300
     phi = phi / scale
     g = phi.T @ phi
     g[np.diag_indices_from(g)] += 1e-12 * np.trace(g) / g.shape[0]
     th = np.linalg.solve(g, phi.T @ y)
-    r = y - phi @ th
-    return float(np.sum(r**2) / (m - phi.shape[1]))
+    return y - phi @ th, phi.shape[1]
+
+
+def _fir_noise_var(xe: np.ndarray, xt: np.ndarray, f: np.ndarray | None, taps: int) -> float:
+    """Noise level of `x_t`: the residual variance of a long FIR regression on `x_e` (and
+    `f`) ([`_fir_residual`][]): sensor noise, encoder quantisation carried through the TMF,
+    and what `taps` samples cannot represent (the slow decay of a lightly damped mode, see
+    [`_pole_basis`][]). Corrected for the fitted parameters, `SSR / (n − p)`."""
+    out = _fir_residual(xe, xt, f, taps)
+    if out is None:
+        return float(np.var(xt)) * 1e-6
+    r, p = out
+    return float(np.sum(r**2) / (r.size - p))
+
+
+def _pole_basis(nominal: StableTMF, u: np.ndarray) -> np.ndarray:
+    """`u` filtered by `σ^k / A(σ)`, `k = 0 … order − 1` (`A` the nominal TMF's
+    denominator, `σ = s / w0`), zero-order hold from rest, as columns `(n, order)`.
+
+    With these columns a linear regression represents any response with the structure's
+    own poles, however lightly damped (a mode that rings far longer than an FIR window),
+    and any numerator: the generalised orthonormal basis idea (Heuberger, Van den Hof,
+    Wahlberg 2005) with the poles of the calibrated model."""
+    den = np.asarray(nominal.scaled_denominator(), float)
+    order = den.size - 1
+    dts = nominal.dt * nominal.w0  # the time step in units of 1 / w0
+    cols = []
+    for k in range(order):
+        num = np.zeros(order)
+        num[order - 1 - k] = 1.0
+        with warnings.catch_warnings():
+            # scipy flags the leading zeros of the strictly proper numerator it trims
+            warnings.simplefilter("ignore", ss.BadCoefficients)
+            b, a, _ = ss.cont2discrete((num, den), dts, method="zoh")
+        cols.append(ss.lfilter(np.ravel(b), a, u))
+    return np.stack(cols, axis=1)
+
+
+def record_noise(exp: Experiment, models: Sequence[StableTMF], taps: int) -> tuple[float, float]:
+    """The measurement noise of one experiment's `x_t`: variance and lag-one
+    autocorrelation of what no linear time-invariant map of the inputs explains.
+
+    The regression holds an FIR window of `x_e` and `f` (delays, short responses) and
+    both inputs filtered through the poles of each TMF of `models`
+    ([`_pole_basis`][]: the calibrated nominal TMF, and one fitted to this experiment
+    alone, whose poles are right where a position moves them), so a lightly damped mode
+    or a force compliance that rings past the window is explained rather than counted
+    as noise. Every effect of the library is linear and
+    time-invariant within one experiment (one position y), so on a record with an effect
+    the estimate is still the noise, not the gap. The variance is corrected for the
+    fitted parameters and less the record's own quantisation `Δ²/12` (the null quantises
+    its records again)."""
+    xe = np.asarray(exp.arrays["x_e"], float)
+    f = np.asarray(exp.arrays["f"], float)
+    has_f = "f" in exp.signals and float(np.ptp(f)) > 0
+    inputs = [xe, f] if has_f else [xe]
+    extra = np.concatenate([_pole_basis(m, u) for m in models for u in inputs], axis=1)
+    out = _fir_residual(xe, exp.y, f if has_f else None, taps, extra)
+    if out is None:
+        return float(exp.noise_var), 0.0
+    r, p = out
+    var = float(np.sum(r**2) / (r.size - p))
+    var = max(var - exp.resolution**2 / 12.0, 0.0)
+    rc = r - r.mean()
+    rho = float(np.dot(rc[1:], rc[:-1]) / max(float(np.dot(rc, rc)), 1e-300))
+    return var, float(np.clip(rho, 0.0, 0.99))
 
 
 class TMFFamily(AbstractFamily):
@@ -649,7 +832,11 @@ class TMFFamily(AbstractFamily):
         else:
             pos = 0.0
         has_f = "f" in record.names
+        # the process force relative to its first sample too: the deflection under the
+        # force at rest is already in x_t[0], which was taken off
         f = np.asarray(record["f"], float) if has_f else np.zeros(n)
+        f0 = np.full(n, f[0])  # the force at the start (see ProcessForce)
+        f = f - f[0]
         taps = int(self.options.get("fir_taps", 150))
         noise_var = _fir_noise_var(xe, xt, f if has_f and np.ptp(f) > 0 else None, taps)
         w = max(4, int(round(0.05 / record.dt)))
@@ -658,7 +845,7 @@ class TMFFamily(AbstractFamily):
         return Experiment(
             name=name,
             t=np.asarray(record.t),
-            arrays={"x_e": xe, "pos_y": np.full(n, pos), "f": f, "y": xt},
+            arrays={"x_e": xe, "pos_y": np.full(n, pos), "f": f, "f0": f0, "y": xt},
             ops=ops,
             masks={},
             noise_var=noise_var,
@@ -704,26 +891,38 @@ class TMFFamily(AbstractFamily):
         rng: np.random.Generator,
         count: int,
     ) -> list[list[Experiment]]:
-        """The calibrated TMF driven by each record's own `x_e`, plus white noise of the
-        record's noise level and the record's quantisation of `x_t` (a random zero per
-        draw).
+        """The calibrated TMF driven by each record's own `x_e`, plus noise of the
+        record's level and colour and the record's quantisation of `x_t` (a random zero
+        per draw).
 
-        The noise level is the smaller of two upper bounds of the record's noise: the
-        residual of a long FIR regression (`noise_var`; it also holds what 150 taps cannot
-        represent, e.g. the slow decay of a lightly damped low mode) and the RMS residual
-        of the calibrated nominal TMF itself (it also holds any unmodelled effect). On an
-        effect-free record the second is the noise, so the null's gap is the record's."""
+        The noise is what no linear time-invariant map of the record's inputs explains
+        ([`record_noise`][]: an FIR window plus the calibrated TMF's own poles), simulated
+        as a first-order autoregression with the residual's variance and lag-one
+        autocorrelation. It is neither the nominal model's residual (which holds any
+        unmodelled effect, so the floor would equal the gap) nor the plain FIR residual
+        (which holds the slow decay of a lightly damped mode)."""
+        nom = unwrap(model.nominal)
+        taps = int(self.options.get("fir_taps", 150))
         out: list[list[Experiment]] = [[] for _ in range(count)]
         for exp in experiments:
             clean = predict(model, exp)
-            rms_resid = float(np.sqrt(np.mean((exp.y - clean) ** 2)))
-            sigma = min(math.sqrt(max(exp.noise_var, 0.0)), rms_resid)
+            models = [nom]
+            try:
+                models.append(self.nominal([exp]))
+            except NotIdentifiable:
+                pass
+            var, rho = record_noise(exp, models, taps)
+            sigma = math.sqrt(var)
             step = exp.resolution
             for k in range(count):
-                y = clean + sigma * rng.standard_normal(clean.shape)
+                w = sigma * math.sqrt(1 - rho * rho) * rng.standard_normal(clean.shape)
+                w[0] = sigma * rng.standard_normal()
+                noise = ss.lfilter([1.0], [1.0, -rho], w)
+                y = clean + noise
                 if step > 0:
                     phase = rng.uniform(0.0, step)
                     y = step * np.round((y + phase) / step) - phase
+                y = y - y[0]  # relative to the first sample, as `prepare` takes the record
                 out[k].append(dataclasses.replace(exp, arrays={**exp.arrays, "y": y}))
         return out
 
