@@ -291,8 +291,13 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         f"{o['cases']} cases ({o['effect_free_cases']} effect-free, {o['effect_cases']} with "
         f"effects), median {o['median_samples']:.0f} samples per case (calibration + "
         f"validation); {meta['cpu_count']} CPU cores shared with other jobs, load average "
-        f"{load['start'][0]:.1f} at the start and {load['end'][0]:.1f} at the end; "
-        f"jax {meta['jax']}, commit {meta.get('commit', '?')}.",
+        + (
+            f"{load['start'][0]:.1f} to {load['end'][0]:.1f} over {len(meta['parts'])} runs "
+            "side by side; "
+            if meta.get("parts")
+            else f"{load['start'][0]:.1f} at the start and {load['end'][0]:.1f} at the end; "
+        )
+        + f"jax {meta['jax']}, commit {meta.get('commit', '?')}.",
         "",
         "| metric | measured | target (issue 14) | |",
         "|---|---|---|---|",
@@ -392,7 +397,8 @@ def _commit() -> str:
 
 def write(rows, meta, out: pathlib.Path) -> str:
     summary = summarise(rows)
-    meta = {**meta, "load_average": {**meta["load_average"], "end": list(os.getloadavg())}}
+    # the load at the end of this run (a merged report keeps its parts' own)
+    meta = {**meta, "load_average": {"end": list(os.getloadavg()), **meta["load_average"]}}
     out.mkdir(parents=True, exist_ok=True)
     (out / "blind_diagnosis.json").write_text(
         json.dumps({"meta": meta, "summary": summary, "cases": rows}, indent=2, default=str) + "\n"
@@ -549,14 +555,19 @@ def _merge(paths: list[str], out: pathlib.Path) -> int:
             rows[r["case"]] = r  # a later file wins for a case run twice
     merged = sorted(rows.values(), key=lambda r: order.get(r["case"], len(order)))
     commits = sorted({str(p["commit"]) for p in parts})
-    starts = [p["load_average"]["start"][0] for p in parts if p.get("load_average")]
+    loads = [p["load_average"] for p in parts if p.get("load_average")]
+    starts = [x["start"][0] for x in loads] + [x["end"][0] for x in loads if "end" in x]
     meta = {
         "machine": platform.platform(),
         "cpu_count": os.cpu_count(),
         "jax": jax.__version__,
         "python": sys.version.split()[0],
         "commit": ", ".join(commits),
-        "load_average": {"start": [max(starts) if starts else float("nan")] * 3},
+        # the lowest and highest load any part saw at its start or end
+        "load_average": {
+            "start": [min(starts) if starts else float("nan")] * 3,
+            "end": [max(starts) if starts else float("nan")] * 3,
+        },
         "parts": parts,
         "cases_planned": [r["case"] for r in merged],
     }
