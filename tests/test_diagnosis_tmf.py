@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 import jaxvs
+from jaxvs.diagnosis._base import fft_delay
 from jaxvs.diagnosis._tmf import (
     MissingMode,
     StableTMF,
     TMFPositionEffect,
-    fft_delay,
 )
 from jaxvs.twins import MachineStructureTwin
 

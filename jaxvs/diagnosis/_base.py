@@ -28,6 +28,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -164,6 +165,23 @@ def delay_rules(tau: float, context: AdmissibilityContext, why: str = "") -> tup
         ),
         (tau < 0.1 * context.duration, f"delay τ = {tau:.3g} s not short against the record"),
     )
+
+
+def exact_zero_at(cond: Array, e: Array) -> Array:
+    """`e`, but exactly 0 where `cond` holds, keeping the derivative of `e` there (a
+    `jnp.where` would zero it and stall the least-squares start at zero size)."""
+    return e - jnp.where(cond, jax.lax.stop_gradient(e), 0.0)
+
+
+def fft_delay(y: Float[Array, " n"], delay: Float[Array, ""]) -> Float[Array, " n"]:
+    """`y` delayed by `delay` samples (any real number), band-limited: the phase of the
+    spectrum of the even extension `[y, reversed y]` (continuous at both joints, so no
+    ringing from the ends) is turned by `e^{−iωτ}`. Exactly `y` at zero delay."""
+    n = y.shape[0]
+    ext = jnp.concatenate([y, y[::-1]])
+    freq = jnp.fft.rfftfreq(2 * n)
+    out = jnp.fft.irfft(jnp.fft.rfft(ext) * jnp.exp(-2j * jnp.pi * freq * delay), 2 * n)[:n]
+    return y + exact_zero_at(delay == 0, out - y)
 
 
 class AbstractEffect(eqx.Module):

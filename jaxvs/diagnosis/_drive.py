@@ -62,13 +62,13 @@ from ._base import (
     NotIdentifiable,
     check,
     delay_rules,
+    fft_delay,
 )
 from ._stats import (
     difference_noise_sigma,
     quantisation_step,
     white_noise_floor,
 )
-from ._tmf import fft_delay
 
 __all__ = ["DriveFamily", "RigidNominal"]
 
@@ -267,6 +267,14 @@ def _motion(q: Array, dt: float) -> tuple[Array, Array]:
     return jnp.convolve(v, kernel, mode="same"), jnp.convolve(a, kernel, mode="same")
 
 
+PRESLIDING = 20e-6
+"""Longest presliding displacement of dry friction the diagnosis expects [m] (heuristic:
+the elastic micro-displacement of rolling and sliding contacts before gross sliding is
+of the order of 1 to 20 µm; Al-Bender & Swevers 2008, *IEEE Control Systems* 28(6)).
+A friction-loaded gap shorter than it cannot be told from friction that keeps its sign
+for that distance after a reversal; an inertial gap (an impact) still can."""
+
+
 class Backlash(AbstractAdditiveEffect):
     """Play of total width `2b` between the motor and a load `m_L` carried by friction.
 
@@ -344,14 +352,6 @@ class Backlash(AbstractAdditiveEffect):
     def parameters(self):
         m, fl = self._sizes()
         return {"gap": 2 * _f(self.b), "m_load": m, "F_load": fl}
-
-
-PRESLIDING = 20e-6
-"""Longest presliding displacement of dry friction the diagnosis expects [m] (heuristic:
-the elastic micro-displacement of rolling and sliding contacts before gross sliding is
-of the order of 1 to 20 µm; Al-Bender & Swevers 2008, *IEEE Control Systems* 28(6)).
-A friction-loaded gap shorter than it cannot be told from friction that keeps its sign
-for that distance after a reversal; an inertial gap (an impact) still can."""
 
 
 def _highpass2(x: Array, w: Array, z: Array, dt: float) -> Array:
@@ -1027,13 +1027,18 @@ class DriveFamily(AbstractFamily):
         ]
 
 
+STANDSTILL = 0.02
+"""Share of the largest speed below which an axis counts as standing still (the
+standstill cell of the gap map, and where external-force events are not sought)."""
+
+
 def _refresh_events(exp: Experiment, residual: np.ndarray) -> Experiment:
     """Attach the event columns of the external-force candidate to an experiment: the
     pulses `detect_events` finds while the axis moves (the same standstill threshold as
     the operating-point cells, 2 % of the largest speed) and, when there is at least one,
     a last column of ones for the unknown level between them (`ExternalForce`)."""
     v = np.asarray(exp.arrays["v"])
-    moving = np.abs(v) > 0.02 * float(np.max(np.abs(v)))
+    moving = np.abs(v) > STANDSTILL * float(np.max(np.abs(v)))
     ev = detect_events(residual, exp.dt, moving=moving)
     if np.any(ev != 0):
         ev[:, -1] = 1.0
@@ -1044,7 +1049,7 @@ def _drive_masks(v: np.ndarray, vmax: float, dt: float) -> dict[str, np.ndarray]
     """Operating-point cells of an axis: velocity reversals (the low-speed passages,
     |v| < 10 % of the largest speed, between motions of opposite sign), standstill
     (|v| < 2 %, not a reversal), and the two directions."""
-    thr = 0.02 * vmax
+    thr = STANDSTILL * vmax
     low = np.abs(v) < 0.1 * vmax
     sign = np.sign(v)
     # runs of constant `low`; a low run is a reversal when the motion before and after it

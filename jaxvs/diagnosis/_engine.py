@@ -771,36 +771,26 @@ def search(
             say("the remaining gap is within the noise floor: stopping")
             break
 
-    pruning: list[dict[str, Any]] = []
-    if len(model.effects) >= 2:
-        say("testing every accepted effect against the final model without it")
-        model, res_all, pruning = _prune(
-            model,
-            res_all,
-            exps,
-            n_cal_exp,
-            scale,
-            max_steps,
-            layout,
-            accepted,
-            candidates,
-            specs,
-            nominal_residuals,
-            min_shrink=min_shrink,
-            min_delta_bic=min_delta_bic,
-            n_boot=n_boot,
-            seed=seed,
-            say=say,
-        )
-    primary = primary_effect(accepted, candidates)
-    return result(
-        noise_floor=noise_floor,
-        null_gaps=null_gaps,
-        primary=primary,
-        final=model,
-        final_residuals=list(res_all),
-        pruning=pruning,
+    model, res_all, pruning = _prune(
+        model,
+        res_all,
+        exps,
+        n_cal_exp,
+        scale,
+        max_steps,
+        layout,
+        accepted,
+        candidates,
+        specs,
+        nominal_residuals,
+        min_shrink=min_shrink,
+        min_delta_bic=min_delta_bic,
+        n_boot=n_boot,
+        seed=seed,
+        say=say,
     )
+    primary = primary_effect(accepted, candidates)
+    return result(noise_floor=noise_floor, null_gaps=null_gaps, primary=primary, pruning=pruning)
 
 
 def _prune(
@@ -810,7 +800,7 @@ def _prune(
     n_cal_exp: int,
     scale: float,
     max_steps: int,
-    layout: Layout,
+    layout: Layout | None,
     accepted: list[str],
     candidates: dict[str, CandidateResult],
     specs: Mapping[str, EffectSpec],
@@ -832,9 +822,10 @@ def _prune(
     becomes what it `explained` (the primary effect is the largest). Mutates `accepted`
     and `candidates`; returns the model, its residuals and one record per test."""
     y_val = np.concatenate([e.y for e in exps[n_cal_exp:]])
-    y_cal_all = [e.y for e in exps[:n_cal_exp]]
     n_cal = int(sum(e.n for e in exps[:n_cal_exp]))
     records: list[dict[str, Any]] = []
+    if len(model.effects) >= 2:
+        say("testing every accepted effect against the final model without it")
     while len(model.effects) >= 2:
         e_full = np.concatenate(res_all[n_cal_exp:])
         r_cal = np.concatenate(res_all[:n_cal_exp])
@@ -844,7 +835,7 @@ def _prune(
         tests = []
         for eff in model.effects:
             reduced = GapModel(model.nominal, tuple(e for e in model.effects if e is not eff))
-            (fitted,), _, _, (pred,) = fit_many(
+            (fitted,), (ssr_red,), _, (pred,) = fit_many(
                 [reduced], [None], exps, n_cal_exp, scale, max_steps, layout
             )
             r_red = [e.y - p for e, p in zip(exps, pred)]
@@ -852,8 +843,7 @@ def _prune(
             g0, g1, shrink, d_int, _ = gap_change_interval(
                 e_red, e_full, y_val, length=block_length(e_red), n_boot=n_boot, seed=seed
             )
-            ssr_red = float(sum(np.sum((y - p) ** 2) for y, p in zip(y_cal_all, pred)))
-            dbic = bic_effective(ssr_red, n_cal, _dof(fitted, exps[:n_cal_exp]), n_eff) - (
+            dbic = bic_effective(float(ssr_red), n_cal, _dof(fitted, exps[:n_cal_exp]), n_eff) - (
                 bic_effective(ssr_full, n_cal, dof_full, n_eff)
             )
             threshold = candidates[eff.name].null_threshold or 0.0

@@ -62,6 +62,8 @@ from ._base import (
     NotIdentifiable,
     check,
     delay_rules,
+    exact_zero_at,
+    fft_delay,
     predict,
 )
 from ._stats import quantisation_step
@@ -354,7 +356,7 @@ class TMFPositionEffect(AbstractAdditiveEffect):
         x = (d["pos_y"][0] - self.centre) / self.half_range
         delta = self.delta(x)
         diff = nominal.simulate(d["x_e"], delta=delta) - nominal(d)
-        return _exact_zero_at(jnp.all(delta == 0), diff)
+        return exact_zero_at(jnp.all(delta == 0), diff)
 
     def extra_dof(self, arrays):
         # without curvature its entries of `size` are calibrated leaves that act on
@@ -444,23 +446,6 @@ class MissingMode(AbstractAdditiveEffect):
             "residue_static": float(s[0]),
             "residue_velocity": float(s[1]),
         }
-
-
-def _exact_zero_at(cond: Array, e: Array) -> Array:
-    """`e`, but exactly 0 where `cond` holds, keeping the derivative of `e` there (a
-    `jnp.where` would zero it and stall the least-squares start at zero size)."""
-    return e - jnp.where(cond, jax.lax.stop_gradient(e), 0.0)
-
-
-def fft_delay(y: Float[Array, " n"], delay: Float[Array, ""]) -> Float[Array, " n"]:
-    """`y` delayed by `delay` samples (any real number), band-limited: the phase of the
-    spectrum of the even extension `[y, reversed y]` (continuous at both joints, so no
-    ringing from the ends) is turned by `e^{−iωτ}`. Exactly `y` at zero delay."""
-    n = y.shape[0]
-    ext = jnp.concatenate([y, y[::-1]])
-    freq = jnp.fft.rfftfreq(2 * n)
-    out = jnp.fft.irfft(jnp.fft.rfft(ext) * jnp.exp(-2j * jnp.pi * freq * delay), 2 * n)[:n]
-    return y + _exact_zero_at(delay == 0, out - y)
 
 
 ZETA_MAX = 0.3
