@@ -547,7 +547,14 @@ def _merge(paths: list[str], out: pathlib.Path) -> int:
     rows: dict[str, dict] = {}
     parts = []
     for path in paths:
-        d = json.loads(pathlib.Path(path).read_text())
+        try:
+            d = json.loads(pathlib.Path(path).read_text())
+            d["meta"], d["cases"]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise SystemExit(
+                f"--merge: {path} is not a blind_diagnosis.json written by this script "
+                f"({type(exc).__name__}: {exc}); give the JSON files of earlier runs"
+            ) from None
         parts.append(
             {"file": str(path), **{k: d["meta"].get(k) for k in ("commit", "load_average")}}
         )
