@@ -196,10 +196,21 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
                 "effect": c["effect"],
                 "shrink": _float(c.get("shrink")),
                 "reason": c.get("reason"),
+                "rejected_by": c.get("rejected_by"),
+                "parameters": c.get("parameters") or {},
             }
             for c in cands
             if not c.get("accepted") and c.get("testable", True)
-        ][:4],
+        ],
+        rounds=[
+            {
+                "round": h.get("round"),
+                "gap_before": _float(h.get("gap_before")),
+                "seconds": _float(h.get("seconds")),
+                "rejected_by": {e: t.get("rejected_by") for e, t in (h.get("tried") or {}).items()},
+            }
+            for h in content.get("rounds") or []
+        ],
         recovery=recovery,
     )
     return row
