@@ -584,16 +584,16 @@ def search(
 
     dof0 = _dof(model, exps[:n_cal_exp])
     layout: Layout | None = None
+    null_stale = False
     for rnd in range(1, max_effects + 1):
         ssr0 = float(cost[0])
         e_val0 = np.concatenate(res_all[n_cal_exp:])
         blen = block_length(e_val0)
-        for s in library:
-            if s.refresh is not None and candidates[s.name].testable:
-                exps = [s.refresh(e, r) for e, r in zip(exps, res_all)]
-                null_sets = [
-                    [s.refresh(e, r) for e, r in zip(ns, nr)] for ns, nr in zip(null_sets, null_res)
-                ]
+        refreshers = [s.refresh for s in library if s.refresh and candidates[s.name].testable]
+        for refresh in refreshers:
+            exps = [refresh(e, r) for e, r in zip(exps, res_all)]
+        if not null_stale:
+            null_sets = _refreshed(refreshers, null_sets, null_res)
 
         open_specs: list[EffectSpec] = []
         for s in library:
@@ -690,6 +690,16 @@ def search(
         # the null: what each remaining candidate gains, from the same start, on the
         # effect-free records (fitted after the current model has been refitted there)
         pending = [c for c in round_results if c.rejected_by is None]
+        if pending and null_stale:
+            # the current model refitted on every null record, done only when a candidate
+            # of this round reaches the null (the last round often rejects all before it)
+            say(f"round {rnd}: refitting the current model on the {n_null} null records")
+            null_models, _, _, null_pred = fit_many(
+                [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps, layout
+            )
+            null_res = [[e.y - p for e, p in zip(ns, pr)] for ns, pr in zip(null_sets, null_pred)]
+            null_sets = _refreshed(refreshers, null_sets, null_res)
+            null_stale = False
         for c in pending:
             _, _, _, start, slot = c._state  # type: ignore[attr-defined]
             t0 = time.perf_counter()
@@ -761,11 +771,7 @@ def search(
         model = chosen.model
         res_all, ssr, dof0, _, _ = chosen._state  # type: ignore[attr-defined]
         cost = np.array([ssr])
-        # the current model refitted on every null record, for the next round's null
-        null_models, _, _, null_pred = fit_many(
-            [model] * n_null, [None] * n_null, null_sets, n_cal_exp, scale, max_steps, layout
-        )
-        null_res = [[e.y - p for e, p in zip(ns, pr)] for ns, pr in zip(null_sets, null_pred)]
+        null_stale = True  # the null records are refitted with this model when next needed
         say(f"round {rnd}: accepted {chosen.effect} (validation gap {chosen.validation_gap:.4f})")
         if chosen.validation_gap <= stop_at_noise * noise_floor:
             say("the remaining gap is within the noise floor: stopping")
@@ -791,6 +797,13 @@ def search(
     )
     primary = primary_effect(accepted, candidates)
     return result(noise_floor=noise_floor, null_gaps=null_gaps, primary=primary, pruning=pruning)
+
+
+def _refreshed(refreshers, null_sets, null_res):
+    """The null records with each refresh applied from the current model's residuals."""
+    for refresh in refreshers:
+        null_sets = [[refresh(e, r) for e, r in zip(ns, nr)] for ns, nr in zip(null_sets, null_res)]
+    return null_sets
 
 
 def _prune(
