@@ -71,6 +71,18 @@ def check_finite(x: Any, what: str, fix: str, *, unit: str = "value(s)") -> Any:
     return x
 
 
+def require_x64(who: str, why: str) -> None:
+    """Refuse to run `who` in JAX's default 32-bit mode, where it would round silently.
+
+    Raises `ValueError` "`who`: needs float64 (`why`). Enable it at the start of your
+    program with jax.config.update(...)". Library code never enables it itself (STYLE)."""
+    if jax.dtypes.canonicalize_dtype(jnp.float64) != jnp.float64:
+        raise ValueError(
+            f"{who}: needs float64 ({why}). Enable it at the start of your program with "
+            'jax.config.update("jax_enable_x64", True).'
+        )
+
+
 def is_traced(tree: Any) -> bool:
     """Whether any leaf of `tree` is a JAX tracer (we are inside `jit`/`vmap`/`grad`)."""
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))

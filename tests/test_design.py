@@ -2,6 +2,7 @@
 
 import json
 
+import jax
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
@@ -260,6 +261,9 @@ def test_bad_data():
         )
     with pytest.raises(TypeError, match="data must be"):
         jaxvs.design(3.0, target="y")
+    with jax.enable_x64(False):  # 32-bit would round every calibration silently
+        with pytest.raises(ValueError, match=r"design: needs float64.*jax_enable_x64"):
+            jaxvs.design({"t": t, "u": np.sin(t), "y": np.cos(t)}, target="y", progress=False)
 
 
 @pytest.mark.slow

@@ -9,6 +9,7 @@ closed forms (AR(1) correlation time) and hand-built records.
 import json
 import math
 
+import jax
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
@@ -357,6 +358,18 @@ def test_bad_options_are_refused():
     fast = DriveTwin().experiment(jr.key(1), duration=2.0, dt=5e-4)
     with pytest.raises(ValueError, match="share one sampling rate"):
         jaxvs.diagnose(rec, fast, family="drive")
+
+
+def test_32_bit_mode_is_refused_before_any_work():
+    """In JAX's default 32-bit mode the recalibrations would round silently (the tmf family
+    failed deep inside its rational fit): `diagnose` and `check` refuse at once, naming the
+    switch."""
+    rec = DriveTwin().experiment(jr.key(0), duration=2.0)
+    with jax.enable_x64(False):
+        with pytest.raises(ValueError, match=r"diagnose: needs float64.*jax_enable_x64"):
+            jaxvs.diagnose(rec, family="tmf")
+        with pytest.raises(ValueError, match=r"check: needs float64.*jax_enable_x64"):
+            jaxvs.check(rec, family="drive")
 
 
 def test_cli_user_errors_and_not_identifiable_exit_codes(tmp_path, capsys):

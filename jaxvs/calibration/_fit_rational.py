@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from .._misc import concrete
+from .._misc import concrete, require_x64
 from ..models import RationalTF
 from . import _lm, _sk
 from ._lm import batched_while
@@ -463,12 +463,7 @@ def fit_rational(
     """
     nb, na = _as_order(order)
     n_params = nb + na + 1
-    if jax.dtypes.canonicalize_dtype(jnp.float64) != jnp.float64:
-        raise ValueError(
-            "fit_rational: needs float64 (the normal equations square the condition "
-            "number). Enable it at the start of your program with "
-            'jax.config.update("jax_enable_x64", True).'
-        )
+    require_x64("fit_rational", "the normal equations square the condition number")
     # Concrete inputs are checked and split in NumPy (no device round trips); traced ones
     # (a caller's `jit`) keep their shape checks and get `eqx.error_if` for values.
     omega_c, H_c = concrete(omega), concrete(H)

@@ -39,6 +39,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
+from .._misc import require_x64
+
 _UNITS = {"rad/s": 1.0, "Hz": 2.0 * np.pi}
 
 
@@ -85,12 +87,7 @@ def prepare_frf(
     io_shape)` restricted to `band`, where `io_shape` is `()`, `(out,)` or `(out, in)`
     as given.
     """
-    if jax.dtypes.canonicalize_dtype(jnp.float64) != jnp.float64:
-        raise ValueError(
-            f"{where}: needs float64 (the normal equations square the condition number of "
-            "the polynomial basis). Enable it at the start of your program with "
-            'jax.config.update("jax_enable_x64", True).'
-        )
+    require_x64(where, "the normal equations square the condition number of the polynomial basis")
     if unit not in _UNITS:
         raise ValueError(f"{where}: unit must be 'rad/s' or 'Hz'; got {unit!r}.")
     scale = _UNITS[unit]

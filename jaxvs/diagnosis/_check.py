@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._html import markdown_to_html, report_html
-from .._misc import json_safe
+from .._misc import json_safe, require_x64
 from ..data import Record, signal_quality
 from ._base import GapModel, NotIdentifiable, unwrap
 from ._diagnose import FAMILIES, _check_signals, _records
@@ -282,6 +282,7 @@ def check(data: Any, *, family: str, **options: Any) -> CheckReport:
     `ValueError` for an unknown family, missing signals or unreadable files (user errors,
     exit code 2 of `jaxvs check`).
     """
+    require_x64("check", "the nominal model's calibration and its Jacobian")
     if family not in FAMILIES:
         raise ValueError(f"check: unknown family {family!r}; choose one of {sorted(FAMILIES)}.")
     recs = _records(data, "calibration")

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from .._misc import require_x64
 from ..data import Record, load, split_blocks
 from ._base import AbstractFamily, NotIdentifiable
 from ._drive import DriveFamily
@@ -173,6 +174,7 @@ def diagnose(
     `report.save(folder)` writes `report.json` and `report.md`.
     """
     t_start = time.perf_counter()
+    require_x64("diagnose", "the recalibrations and the information criteria")
     if family not in FAMILIES:
         raise ValueError(f"diagnose: unknown family {family!r}; choose one of {sorted(FAMILIES)}.")
     if not 0 < holdout < 1:

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 
+from ..._misc import require_x64
 from ..._progress import Progress
 from ..thermal import mapd as _mapd, r2 as _r2
 from ._data import prepare
@@ -190,6 +191,7 @@ def design(
     for the smallest design, unknown signal names, bad options; `TypeError` for data of
     the wrong kind.
     """
+    require_x64("design", "the calibration of every candidate sensor")
     t_start = time.perf_counter()
     structures = tuple(structures)
     bad = [s for s in structures if s not in STRUCTURES]
