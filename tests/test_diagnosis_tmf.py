@@ -61,18 +61,20 @@ def test_missing_mode_and_position_dependence_match_rational_simulation(u):
     np.testing.assert_allclose(
         np.asarray(mode.contribution({"x_e": u}, model)), np.asarray(ref), atol=1e-11
     )
-    # moved parameters: numerator B + x ΔB, log ω + x Δlog ω + x² Δ²log ω, log ζ alike;
-    # oracle: jaxvs.simulate of the TMF rebuilt in NumPy from the moved modes
-    size = jnp.array([0.0, 0.0, 0.01, -0.02, 0.03, 0.05, -0.1, 0.2, -0.3, 0.01, 0.02, -0.05, 0.1])
+    # moved parameters: every flat parameter θ + x Δθ + x² Δ²θ (numerator B, log ω,
+    # log ζ); oracle: jaxvs.simulate of the TMF rebuilt in NumPy from the moved modes
+    lin = [0.0, 0.0, 0.01, -0.02, 0.03, 0.05, -0.1, 0.2, -0.3]
+    curv = [0.0, 0.001, 0.0, 0.002, -0.001, 0.01, 0.02, -0.05, 0.1]
+    size = jnp.array(lin + curv)
     eff = TMFPositionEffect(size, 0.2, 0.1)
     d = {"x_e": u, "pos_y": jnp.full(u.shape, 0.4)}  # x = 2
     got = np.asarray(model(d) + eff.contribution(d, model))
     s = np.asarray(size)
-    w = np.exp(np.asarray(model.log_omega) + 2 * s[5:7] + 4 * s[9:11])
-    z = np.exp(np.asarray(model.log_zeta) + 2 * s[7:9] + 4 * s[11:13])
+    w = np.exp(np.asarray(model.log_omega) + 2 * s[5:7] + 4 * s[14:16])
+    z = np.exp(np.asarray(model.log_zeta) + 2 * s[7:9] + 4 * s[16:18])
     den = np.polymul([1.0, 2 * z[0] * w[0], w[0] ** 2], [1.0, 2 * z[1] * w[1], w[1] ** 2])
     powers = 1000.0 ** np.arange(5)
-    num = (np.asarray(model.num) + 2 * s[:5]) * powers
+    num = (np.asarray(model.num) + 2 * s[:5] + 4 * s[9:14]) * powers
     ref = np.asarray(jaxvs.simulate(jaxvs.RationalTF(num, den * powers), u, DT, method="zoh"))
     # exact discretisation of the same TMF: rounding of the modal form only
     np.testing.assert_allclose(got, ref, atol=1e-9 * np.abs(ref).max())
@@ -81,8 +83,23 @@ def test_missing_mode_and_position_dependence_match_rational_simulation(u):
     assert params["mode_1_frequency_change"] == pytest.approx(np.expm1(0.05 + 0.01), rel=1e-12)
     assert params["mode_2_damping_change"] == pytest.approx(np.expm1(-0.3 + 0.1), rel=1e-12)
     # zero size is exactly the nominal model (the engine gates effects by data)
-    zero = TMFPositionEffect(jnp.zeros(13), 0.2, 0.1).contribution(d, model)
+    zero = TMFPositionEffect(jnp.zeros(18), 0.2, 0.1).contribution(d, model)
     assert np.all(np.asarray(zero) == 0.0)
+    # a fixed centre offset moves the TMF at every position, x = 0 included: oracle the
+    # rational TMF with the offset's log ω (mode 1 up 10 %) and nothing else moved
+    offset = jnp.zeros(9).at[5].set(np.log(1.1))
+    moved = TMFPositionEffect(jnp.zeros(18), 0.2, 0.1, True, offset)
+    assert moved.parameters()["centre_offset_norm"] == pytest.approx(np.log(1.1), rel=1e-12)
+    at_centre = {"x_e": u, "pos_y": jnp.full(u.shape, 0.2)}
+    got = np.asarray(model(at_centre) + moved.contribution(at_centre, model))
+    w = np.exp(np.asarray(model.log_omega)) * np.array([1.1, 1.0])
+    z = np.exp(np.asarray(model.log_zeta))
+    den = np.polymul([1.0, 2 * z[0] * w[0], w[0] ** 2], [1.0, 2 * z[1] * w[1], w[1] ** 2])
+    num = np.asarray(model.num) * powers
+    ref = np.asarray(jaxvs.simulate(jaxvs.RationalTF(num, den * powers), u, DT, method="zoh"))
+    np.testing.assert_allclose(got, ref, atol=1e-9 * np.abs(ref).max())
+    # the offset is never calibrated
+    assert isinstance(moved.constrained().offset, jaxvs.calibration.Fixed)
 
 
 def test_fractional_delay_of_band_limited_signal():

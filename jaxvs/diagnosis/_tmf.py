@@ -305,52 +305,64 @@ def _positive(x) -> Positive:
 
 def _position_layout(n_size: int) -> tuple[int, int, int]:
     """`(order + 1, sections, odd poles)` of the TMF behind a position effect's `size`
-    of `n_size` entries: `(2 order + 1)` slopes and `2 (order // 2)` curvatures."""
-    for order in range(1, 64):
-        if 2 * order + 1 + 2 * (order // 2) == n_size:
-            return order + 1, order // 2, order % 2
-    raise ValueError(f"position effect: {n_size} sizes fit no TMF order")
+    of `n_size` entries: `2 order + 1` slopes (every `flat()` parameter), then as many
+    curvatures."""
+    order, rest = divmod(n_size // 2 - 1, 2)
+    if n_size % 2 or rest or order < 1:
+        raise ValueError(f"position effect: {n_size} sizes fit no TMF order")
+    return order + 1, order // 2, order % 2
 
 
 class TMFPositionEffect(AbstractAdditiveEffect):
     """TMF parameters that change with the other axis' position `y`: the numerator
     `B(σ)`, the log natural frequencies, log damping ratios (and the log real pole) of
-    the nominal TMF move by `x · slope`, and the log frequencies and dampings also by
-    `x² · curvature`, `x = (y − ȳ)/h` with `ȳ`, `h` the centre and half-range of the
-    calibration positions.
+    the nominal TMF move by `x · slope + x² · curvature`, `x = (y − ȳ)/h` with `ȳ`, `h`
+    the centre and half-range of the calibration positions. A fixed `offset` (never
+    calibrated) moves the nominal TMF to the centre TMF of the start: where the modes
+    move by more than their bandwidth over the travel, the nominal model fitted to all
+    positions at once is a blur (one broad mode where each position has a sharp one),
+    and a slope alone cannot make every position sharp again; the nominal parameters
+    stay calibrated, so the offset only chooses where the joint calibration starts and
+    adds no degree of freedom.
 
     The modal form keeps the TMF stable at every position and every iterate (no root
     of a moved polynomial can cross the imaginary axis); a mode frequency that changes
     by a share per unit travel (a stiffness or an overhang length changing with the
     position, `ω ∝ √(k/m)`) is linear in `log ω` to first order, and the curvature
     holds a change that is not monotonic over the travel (a preload or a guide whose
-    stiffness peaks mid-travel). With two positions the curvature is not identified
+    stiffness peaks mid-travel) and the numerator's, which moves with the modes'
+    frequencies and residues nonlinearly (a slope alone leaves the far positions worse
+    than the nominal model). With two positions the curvature is not identified
     (`x² = 1` at both: an extrapolation would amplify whatever it took from the
     nominal model), so it acts only with three positions or more (`curved`).
     """
 
     name: ClassVar[str] = "position_dependence"
     order: ClassVar[int] = 0
-    # (ΔB (order + 1), Δlog ω, Δlog ζ, Δlog p) per half-range, then the curvatures
-    # (Δ²log ω, Δ²log ζ) per squared half-range
+    # (ΔB (order + 1), Δlog ω, Δlog ζ, Δlog p) per half-range, then the same curvatures
+    # per squared half-range
     size: Float[Array, " p"]
     centre: Any  # ȳ [m]; never calibrated
     half_range: Any  # h [m]; never calibrated
     curved: bool = eqx.field(static=True, default=True)  # three positions or more
+    # change of the nominal's `flat()` parameters at the centre; never calibrated
+    offset: Any = None
+
+    def __post_init__(self):
+        if self.offset is None:
+            n1, ns, no = _position_layout(int(self.size.shape[0]))
+            object.__setattr__(self, "offset", jnp.zeros((n1 + 2 * ns + no,), self.size.dtype))
 
     def constrained(self):
-        return eqx.tree_at(lambda e: (e.centre, e.half_range), self, replace_fn=fixed)
+        return eqx.tree_at(lambda e: (e.centre, e.half_range, e.offset), self, replace_fn=fixed)
 
     def delta(self, x: Any) -> Array:
         """The change of the nominal TMF's `flat()` parameters at `x` (half-ranges)."""
-        n1, ns, no = _position_layout(int(self.size.shape[0]))
-        p = n1 + 2 * ns + no
+        p = int(self.size.shape[0]) // 2
         lin, curv = self.size[:p], self.size[p:]
-        zeros = jnp.zeros((n1,), self.size.dtype)
-        curv_full = jnp.concatenate([zeros, curv, jnp.zeros((no,), self.size.dtype)])
         if not self.curved:
-            return x * lin
-        return x * lin + x * x * curv_full
+            return self.offset + x * lin
+        return self.offset + x * lin + x * x * curv
 
     def contribution(self, d, nominal):
         x = (d["pos_y"][0] - self.centre) / self.half_range
@@ -361,8 +373,7 @@ class TMFPositionEffect(AbstractAdditiveEffect):
     def extra_dof(self, arrays):
         # without curvature its entries of `size` are calibrated leaves that act on
         # nothing: not degrees of freedom
-        n1, ns, no = _position_layout(int(self.size.shape[0]))
-        return 0 if self.curved else -2 * ns
+        return 0 if self.curved else -(int(self.size.shape[0]) // 2)
 
     def admissible(self, context):
         """Finite values, and every mode of the TMF inside the analysed band over the
@@ -395,12 +406,15 @@ class TMFPositionEffect(AbstractAdditiveEffect):
             "y_centre": _f(self.centre),
             "y_half_range": _f(self.half_range),
             "numerator_slope_norm": float(np.linalg.norm(s[:n1])),
+            "centre_offset_norm": float(np.linalg.norm(np.asarray(self.offset))),
         }
+        out["numerator_curvature_norm"] = float(np.linalg.norm(s[p : p + n1]))
         for k in range(ns):  # sections in the nominal's order
             # relative change from the centre to the upper end of the positions
-            out[f"mode_{k + 1}_frequency_change"] = float(np.expm1(s[n1 + k] + s[p + k]))
-            out[f"mode_{k + 1}_damping_change"] = float(np.expm1(s[n1 + ns + k] + s[p + ns + k]))
-            out[f"mode_{k + 1}_log_frequency_curvature"] = float(s[p + k])
+            w, z = n1 + k, n1 + ns + k
+            out[f"mode_{k + 1}_frequency_change"] = float(np.expm1(s[w] + s[p + w]))
+            out[f"mode_{k + 1}_damping_change"] = float(np.expm1(s[z] + s[p + z]))
+            out[f"mode_{k + 1}_log_frequency_curvature"] = float(s[p + w])
         return out
 
 
@@ -566,24 +580,26 @@ def _t_position(ctx: Context) -> list[AbstractEffect]:
     half = max((hi - lo) / 2, 1e-12)
     centre = (lo + hi) / 2
     nom = ctx.model.nominal
-    n_size = int(nom.flat().shape[0]) + 2 * int(nom.log_omega.shape[0])
+    n_size = 2 * int(nom.flat().shape[0])
     zero = jnp.zeros((n_size,))
     curved = np.unique(np.round(ys, 12)).size >= 3
     starts = [TMFPositionEffect(zero, jnp.asarray(centre), jnp.asarray(half), curved)]
-    size = _position_start(ctx, (ys - centre) / half)
-    start = (
-        starts[0]
-        if size is None
-        else TMFPositionEffect(jnp.asarray(size), jnp.asarray(centre), jnp.asarray(half), curved)
+    fitted = _position_start(ctx, (ys - centre) / half)
+    if fitted is None:
+        return starts + starts  # always two starts: one compilation
+    size, offset = fitted
+    start = TMFPositionEffect(
+        jnp.asarray(size), jnp.asarray(centre), jnp.asarray(half), curved, jnp.asarray(offset)
     )
-    return starts + [start]  # always two starts: one compilation
+    return starts + [start]
 
 
-def _position_start(ctx: Context, x: np.ndarray) -> np.ndarray | None:
-    """The position effect's `size` regressed from TMFs fitted to each calibration
-    experiment alone (in the nominal model's frequency scale, sections matched by
-    frequency rank); `None` when a fit has another structure than the nominal model (a
-    real pole pair instead of a section) or fails."""
+def _position_start(ctx: Context, x: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The position effect's `size` and centre `offset` regressed from TMFs fitted to each
+    calibration experiment alone (in the nominal model's frequency scale, sections matched
+    by frequency rank): the slope (and curvature) of the regression, and its intercept
+    less the nominal parameters; `None` when a fit has another structure than the
+    nominal model (a real pole pair instead of a section) or fails."""
     nom = ctx.model.nominal
     fam = TMFFamily(**ctx.options)
     rank = np.argsort(np.asarray(nom.log_omega))
@@ -603,11 +619,10 @@ def _position_start(ctx: Context, x: np.ndarray) -> np.ndarray | None:
     distinct = np.unique(np.round(x, 9)).size
     if not np.all(np.isfinite(flats_a)) or distinct < 2:
         return None
-    n1, ns = int(nom.num.shape[0]), int(nom.log_omega.shape[0])
     cols = [np.ones_like(x), x] + ([x * x] if distinct >= 3 else [])
     coef, *_ = np.linalg.lstsq(np.stack(cols, axis=1), flats_a, rcond=None)
-    curv = coef[2][n1 : n1 + 2 * ns] if distinct >= 3 else np.zeros(2 * ns)
-    return np.concatenate([coef[1], curv])
+    curv = coef[2] if distinct >= 3 else np.zeros_like(coef[1])
+    return np.concatenate([coef[1], curv]), coef[0] - np.asarray(nom.flat())
 
 
 def _t_mode(ctx: Context) -> list[AbstractEffect]:
