@@ -429,6 +429,13 @@ class SearchResult:
 # ------------------------------------------------------------------------------ search
 
 
+RETRY_SHARE = 0.5
+"""A candidate whose admissible fit made the held-out gap significantly worse is tried
+again once the held-out gap has fallen below this share of the gap it was judged
+against (heuristic: the residual it was fitted to was then dominated by effects since
+explained, which a delay or a mode fitted alone tries to imitate)."""
+
+
 def _first_failure(c: CandidateResult, min_shrink: float, min_delta_bic: float) -> str | None:
     """The first acceptance test (before the null) a tried candidate fails, or None."""
     if not c.admissible:
@@ -513,7 +520,8 @@ def search(
     held-out reduction wins. The loop stops when no candidate passes, after
     `max_effects` effects, or when the validation gap is within `stop_at_noise` times
     the null's noise floor. A candidate whose admissible fit made the held-out gap
-    significantly worse in one round is not tried again.
+    significantly worse in one round is not tried again until the held-out gap has fallen
+    below `RETRY_SHARE` of the gap it was judged against.
     """
     say = progress or (lambda msg: None)
     rng = np.random.default_rng(seed)
@@ -589,7 +597,9 @@ def search(
         e_val0 = np.concatenate(res_all[n_cal_exp:])
         blen = block_length(e_val0)
         for s in library:
-            if s.refresh is not None and candidates[s.name].testable:
+            # an accepted effect keeps the data it was accepted with: its events were
+            # found in the residual without it, and the current residual no longer shows them
+            if s.refresh is not None and candidates[s.name].testable and s.name not in accepted:
                 exps = [s.refresh(e, r) for e, r in zip(exps, res_all)]
                 null_sets = [
                     [s.refresh(e, r) for e, r in zip(ns, nr)] for ns, nr in zip(null_sets, null_res)
@@ -609,8 +619,13 @@ def search(
                 and prev.reduction_interval is not None
                 and prev.reduction_interval[1] < 0
                 and s.extends is None
+                and prev.gap_before is not None
+                and nrmse(e_val0, y_val) > RETRY_SHARE * prev.gap_before
             ):
-                continue  # an admissible fit that made the held-out gap significantly worse
+                # an admissible fit that made the held-out gap significantly worse, judged
+                # against a residual that still stands (once the effects accepted since have
+                # explained most of it, the fit was corrupted by them and is tried again)
+                continue
 
             open_specs.append(s)
         if not open_specs:
