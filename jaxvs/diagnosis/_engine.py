@@ -436,6 +436,21 @@ against (heuristic: the residual it was fitted to was then dominated by effects 
 explained, which a delay or a mode fitted alone tries to imitate)."""
 
 
+def judged_worse(prev: CandidateResult, gap_now: float) -> bool:
+    """Whether a candidate is left out of this round: its admissible fit made the held-out
+    gap significantly worse (bootstrap interval of the reduction below 0) against a
+    residual that still stands, the held-out gap `gap_now` being above `RETRY_SHARE` of
+    the gap it was judged against. Once the effects accepted since have explained most of
+    that gap, its fit was corrupted by them and it is tried again."""
+    return bool(
+        prev.admissible
+        and prev.reduction_interval is not None
+        and prev.reduction_interval[1] < 0
+        and prev.gap_before is not None
+        and gap_now > RETRY_SHARE * prev.gap_before
+    )
+
+
 def _first_failure(c: CandidateResult, min_shrink: float, min_delta_bic: float) -> str | None:
     """The first acceptance test (before the null) a tried candidate fails, or None."""
     if not c.admissible:
@@ -613,18 +628,7 @@ def search(
                 continue  # an extension of it is already in
             if s.extends is not None and any(specs[a].extends == s.extends for a in accepted):
                 continue  # a sibling extension of the same base is already in
-            prev = candidates[s.name]
-            if (
-                prev.admissible
-                and prev.reduction_interval is not None
-                and prev.reduction_interval[1] < 0
-                and s.extends is None
-                and prev.gap_before is not None
-                and nrmse(e_val0, y_val) > RETRY_SHARE * prev.gap_before
-            ):
-                # an admissible fit that made the held-out gap significantly worse, judged
-                # against a residual that still stands (once the effects accepted since have
-                # explained most of it, the fit was corrupted by them and is tried again)
+            if s.extends is None and judged_worse(candidates[s.name], nrmse(e_val0, y_val)):
                 continue
 
             open_specs.append(s)
