@@ -238,3 +238,36 @@ def test_friction_holds_the_axis_at_rest_up_to_its_static_level():
     # held forces up to ±40 N: beyond ±20 N the Coulomb level cannot hold them
     assert c > 4.0
     assert s < 1.0 and s_slide < 1e-6
+
+
+def test_pulses_that_follow_each_other_without_a_pause_are_separate_events():
+    """Two unmeasured loads that follow each other without a pause (+40 N for 0.25 s, then
+    −40 N for 0.3 s, then +25 N stacked on a 15 N load) form one run beyond the detection
+    threshold but three levels: each level is its own event, so that one amplitude per
+    event can represent them. Oracle: the plateaus written here."""
+    dt = 2e-3
+    t = np.arange(0, 6.0, dt)
+    rng = np.random.default_rng(3)
+    res = 0.5 * rng.standard_normal(t.size)
+    truth = [(2.0, 2.25, 40.0), (2.25, 2.55, -40.0), (4.0, 4.3, 15.0), (4.3, 4.6, 40.0)]
+    for a, b, level in truth:
+        res[(t >= a) & (t < b)] += level
+    ev = detect_events(res, dt)
+    used = np.flatnonzero(np.any(ev != 0, axis=0))
+    assert used.size == len(truth)
+    spans = sorted((t[ev[:, k] == 1][0], t[ev[:, k] == 1][-1]) for k in used)
+    for (a, b, _), (s, e) in zip(truth, spans):
+        # each boundary within half the 50 ms detection window: the split is at the mean
+        # shift of the raw residual, the outer ends are where the 50 ms average crosses
+        assert abs(s - a) <= 0.025 + dt and abs(e - (b - dt)) <= 0.025 + dt
+    # one amplitude per event reproduces each plateau: the outer end of an event may reach
+    # half a window (25 ms) beyond the force, diluting its mean by at most 25 ms over the
+    # plateau's duration, plus the noise (0.5 N white over ≥ 125 samples: 0.2 N is 4
+    # standard errors); without the split, +40 and −40 N would share one amplitude near 0
+    amp, *_ = np.linalg.lstsq(ev[:, used], res, rcond=None)
+    for (a, b, level), got in zip(truth, amp):
+        assert abs(got - level) <= abs(level) * 0.025 / (b - a) + 0.2
+    # an event without a level step stays whole
+    one = 0.5 * rng.standard_normal(t.size)
+    one[(t >= 1.0) & (t < 1.5)] += 30.0
+    assert int(np.sum(np.any(detect_events(one, dt) != 0, axis=0))) == 1

@@ -731,15 +731,53 @@ def detect_events(
         for s0, s1 in zip(starts, ends):
             if s1 - s0 + 1 < w:
                 continue
-            if moving is not None and int(np.sum(moving[s0 : s1 + 1])) < w:
-                continue
-            col = np.zeros(e.size)
-            col[s0 : s1 + 1] = 1.0
-            cols.append(col)
+            for p0, p1 in _split_levels(e, s0, s1 + 1, w, threshold * sigma):
+                if moving is not None and int(np.sum(moving[p0:p1])) < w:
+                    continue
+                col = np.zeros(e.size)
+                col[p0:p1] = 1.0
+                cols.append(col)
     out = np.zeros((e.size, MAX_EVENTS))
     for k, col in enumerate(cols[: MAX_EVENTS - 1]):
         out[:, k] = col
     return out
+
+
+def _split_levels(e: np.ndarray, start: int, stop: int, w: int, step: float):
+    """Pieces of constant level of the event `e[start:stop]`: unmeasured forces that
+    overlap or follow each other without a pause (a pulse of one sign right after one of
+    the other, a second load added to the first) form one run beyond the threshold but
+    several levels. The run is cut by binary segmentation (Scott & Knott 1974): at the
+    sample where the likelihood ratio of a mean shift, `|mean_left − mean_right|·
+    sqrt(n_l n_r / n)`, is largest, when the two means differ by more than `step` (the
+    threshold an event itself must pass) and both pieces last at least `w` samples.
+    The cut is sought in the core of the run, half a window inside its ends: the run was
+    found on the residual averaged over `w` samples, so its ends may reach up to half a
+    window beyond the force, and that margin is not a level of its own.
+
+    **Returns:** a list of `(start, stop)` index pairs, in order."""
+    h = w // 2
+    cuts = [start + h + k for k in _level_cuts(e[start + h : stop - h], w, step)]
+    bounds = [start, *cuts, stop]
+    return list(zip(bounds[:-1], bounds[1:]))
+
+
+def _level_cuts(x: np.ndarray, w: int, step: float) -> list[int]:
+    """Indices where `x` changes level by more than `step` (binary segmentation, pieces
+    of at least `w` samples), in order."""
+    n = x.size
+    if n < 2 * w:
+        return []
+    c = np.cumsum(x)
+    k = np.arange(w, n - w + 1)
+    left = c[k - 1] / k
+    right = (c[-1] - c[k - 1]) / (n - k)
+    diff = np.abs(left - right)
+    best = int(np.argmax(diff * np.sqrt(k * (n - k) / n)))
+    if not diff[best] > step:
+        return []
+    cut = int(k[best])
+    return [*_level_cuts(x[:cut], w, step), cut, *(cut + j for j in _level_cuts(x[cut:], w, step))]
 
 
 class DriveFamily(AbstractFamily):

@@ -512,8 +512,10 @@ def search(
     the accepted, a base goes before its extension (marginality), otherwise the largest
     held-out reduction wins. The loop stops when no candidate passes, after
     `max_effects` effects, or when the validation gap is within `stop_at_noise` times
-    the null's noise floor. A candidate whose admissible fit made the held-out gap
-    significantly worse in one round is not tried again.
+    the null's noise floor. Every open candidate is tried in every round, also one whose
+    fit made the held-out gap worse before: the residual it is fitted to changes with
+    each accepted effect (a delay fitted beside unmodelled friction imitates the
+    friction, and is only judged fairly once the friction is in the model).
     """
     say = progress or (lambda msg: None)
     rng = np.random.default_rng(seed)
@@ -589,7 +591,13 @@ def search(
         ssr0 = float(cost[0])
         e_val0 = np.concatenate(res_all[n_cal_exp:])
         blen = block_length(e_val0)
-        refreshers = [s.refresh for s in library if s.refresh and candidates[s.name].testable]
+        # an accepted effect keeps the data it was accepted with: its events were found in
+        # the residual without it, and the current residual no longer shows them
+        refreshers = [
+            s.refresh
+            for s in library
+            if s.refresh and candidates[s.name].testable and s.name not in accepted
+        ]
         for refresh in refreshers:
             exps = [refresh(e, r) for e, r in zip(exps, res_all)]
         if not null_stale:
@@ -603,15 +611,6 @@ def search(
                 continue  # an extension of it is already in
             if s.extends is not None and any(specs[a].extends == s.extends for a in accepted):
                 continue  # a sibling extension of the same base is already in
-            prev = candidates[s.name]
-            if (
-                prev.admissible
-                and prev.reduction_interval is not None
-                and prev.reduction_interval[1] < 0
-                and s.extends is None
-            ):
-                continue  # an admissible fit that made the held-out gap significantly worse
-
             open_specs.append(s)
         if not open_specs:
             break
