@@ -247,6 +247,21 @@ def test_null_threshold_is_the_quantile_or_the_bonferroni_normal_tail():
     assert null_threshold([0.1], 0.95, 1) == np.inf  # a null of one record decides nothing
 
 
+def test_null_threshold_counts_a_loss_on_a_null_record_as_no_gain():
+    # 18 null records gain nothing (|gain| ≤ 1e-4); on one the fit went to a local minimum
+    # and lost 0.5. Oracle: the losses count as zero gain, so the threshold is the normal
+    # tail of 18 small gains and one zero, computed by hand with numpy; the loss must not
+    # widen it (with the raw loss the sd is ~0.11 and the threshold ~0.3)
+    rng = np.random.default_rng(4)
+    g = 1e-4 * rng.uniform(-1.0, 1.0, 19)
+    g[7] = -0.5
+    clipped = np.maximum(g, 0.0)
+    z = 2.497705  # scipy.stats.norm.ppf(1 − 0.05 / 8)
+    expected = max(np.quantile(clipped, 0.95), clipped.mean() + z * clipped.std(ddof=1))
+    assert null_threshold(g, 0.95, 8) == pytest.approx(expected, rel=1e-5)
+    assert null_threshold(g, 0.95, 8) < 1e-3  # a held-out reduction of 0.004 passes it
+
+
 def test_effective_samples_of_ar1_follow_correlation_time():
     # AR(1) with φ = 0.8: τ = (1 + φ)/(1 − φ) = 9, so N_eff = N/9 (sampling error ~10 %)
     rng = np.random.default_rng(0)
