@@ -453,18 +453,25 @@ ZETA_MAX = 0.3
 
 
 class SensorDelay(AbstractEffect):
-    """`x_t` recorded `tau` [s] after the motion it measures (a transport or filter delay)."""
+    """`x_t` recorded `tau` [s] after the motion it measures (a transport or filter delay).
+
+    `lag` holds the delay's signature measured before the fit (never calibrated): the
+    phase delay `(τ_φ, its standard error)` [s] of the measured `x_t` behind the current
+    model's prediction ([`phase_delay`][]); `None` when not measured."""
 
     name: ClassVar[str] = "sensor_delay"
     order: ClassVar[int] = 1
     tau: Float[Array, ""]  # [s]
     dt: float = eqx.field(static=True)
+    lag: Any = None  # (τ_φ, standard error) [s]
 
     def apply(self, y, d, nominal):
         return fft_delay(y, self.tau / self.dt)
 
     def constrained(self):
-        return self
+        if self.lag is None:
+            return self
+        return eqx.tree_at(lambda e: e.lag, self, replace_fn=fixed)
 
     def extra_dof(self, arrays):
         return 0
@@ -474,10 +481,28 @@ class SensorDelay(AbstractEffect):
         admissible: the tool-side channel's own measurement chain (an anti-alias filter's
         group delay, a converter) delays it by less than a sample, and the band-limited
         shift resolves that."""
-        return check(*delay_rules(_f(self.tau), context, min_samples=0.0))
+        lag, se = (math.nan, math.nan) if self.lag is None else np.asarray(self.lag, float)
+        return check(
+            *delay_rules(_f(self.tau), context, min_samples=0.0),
+            (
+                not np.isfinite(lag) or lag > LAG_Z * se,
+                f"the measured x_t does not lag the model (phase delay of the cross spectrum "
+                f"{1e3 * lag:.3g} ± {1e3 * se:.2g} ms): no delay's signature",
+            ),
+        )
 
     def parameters(self):
-        return {"tau_s": _f(self.tau)}
+        out = {"tau_s": _f(self.tau)}
+        if self.lag is not None:
+            lag, se = np.asarray(self.lag, float)
+            out["phase_delay_before_s"] = float(lag)
+            out["phase_delay_before_se_s"] = float(se)
+        return out
+
+
+LAG_Z = 3.0
+"""Standard errors by which the signature's phase delay must exceed zero (one-sided,
+p ≈ 0.001): a lag the phase estimate's own noise does not explain."""
 
 
 class ProcessForce(AbstractAdditiveEffect):
@@ -504,6 +529,9 @@ class ProcessForce(AbstractAdditiveEffect):
     size: Float[Array, " n1"]  # N(σ), highest power first, in units of g
     gain: Any  # g [m/N] = RMS(x_t) / RMS(f) of the calibration data; never calibrated
     unbalanced: Any = 0.0  # θ [-]: κ = sigmoid(θ), share of f(0) unbalanced at the start
+    # the signature measured before the fit (never calibrated): the largest coherence of
+    # the residual with f and its null level ([`force_coherence`][]); None: not measured
+    coherence: Any = None
 
     def contribution(self, d, nominal):
         a0 = nominal.scaled_denominator()[-1]
@@ -511,7 +539,9 @@ class ProcessForce(AbstractAdditiveEffect):
         return nominal.simulate(force, num=self.gain * a0 * self.size)
 
     def constrained(self):
-        return eqx.tree_at(lambda e: e.gain, self, replace_fn=fixed)
+        if self.coherence is None:
+            return eqx.tree_at(lambda e: e.gain, self, replace_fn=fixed)
+        return eqx.tree_at(lambda e: (e.gain, e.coherence), self, replace_fn=fixed)
 
     def extra_dof(self, arrays):
         return 0
@@ -521,7 +551,15 @@ class ProcessForce(AbstractAdditiveEffect):
         ok = bool(np.all(np.isfinite(np.asarray(self.size)))) and bool(
             np.isfinite(_f(self.unbalanced))
         )
-        return (True, None) if ok else (False, "non-finite compliance numerator")
+        coh, level = (1.0, 0.0) if self.coherence is None else np.asarray(self.coherence)
+        return check(
+            (ok, "non-finite compliance numerator"),
+            (
+                coh > level,
+                f"the residual is not coherent with the measured force (largest coherence "
+                f"{coh:.3g}, null level {level:.3g}): no process force's signature",
+            ),
+        )
 
     def parameters(self):
         b = np.asarray(self.size)
@@ -529,6 +567,10 @@ class ProcessForce(AbstractAdditiveEffect):
         for i, bi in enumerate(b[::-1][1:], start=1):
             out[f"b{i}"] = float(bi)  # coefficient of σ^i (σ = s / w0), in units of g
         out["unbalanced_share_at_start"] = 0.5 * (1 + math.tanh(0.5 * _f(self.unbalanced)))
+        if self.coherence is not None:
+            coh, level = np.asarray(self.coherence, float)
+            out["force_coherence_before"] = float(coh)
+            out["force_coherence_null_level"] = float(level)
         return out
 
 
@@ -719,7 +761,9 @@ def _t_delay(ctx: Context) -> list[AbstractEffect]:
     # cost has local minima about a sample apart; and the TMF's numerator absorbs part of
     # a delay. Starts from half a sample (a filter's group delay) to six samples; the best
     # admissible fit by calibration cost is kept.
-    return [SensorDelay(jnp.asarray(k * dt), dt) for k in (0.5, 1.5, 3.0, 6.0)]
+    pred = [e.y - np.asarray(r) for e, r in zip(ctx.experiments, ctx.residuals)]
+    lag = jnp.asarray(phase_delay(pred, [e.y for e in ctx.experiments], dt)[:2])
+    return [SensorDelay(jnp.asarray(k * dt), dt, lag) for k in (0.5, 1.5, 3.0, 6.0)]
 
 
 def _t_force(ctx: Context) -> list[AbstractEffect]:
@@ -730,7 +774,10 @@ def _t_force(ctx: Context) -> list[AbstractEffect]:
         return []
     gain = float(np.sqrt(np.mean(xt**2))) / fr
     n1 = int(ctx.model.nominal.num.shape[0])
-    return [ProcessForce(jnp.zeros(n1), jnp.asarray(gain), jnp.asarray(0.0))]
+    dt = ctx.experiments[0].dt
+    forces = [np.asarray(e.arrays["f"]) for e in ctx.experiments]
+    coherence = jnp.asarray(force_coherence(ctx.residuals, forces, dt))
+    return [ProcessForce(jnp.zeros(n1), jnp.asarray(gain), jnp.asarray(0.0), coherence)]
 
 
 def _needs_positions(experiments: Sequence[Experiment]) -> str | None:
