@@ -160,17 +160,18 @@ def test_tmf_effects_admissibility():
     ctx_tmf = AdmissibilityContext(
         record_dt=dt, analysis_dt=dt, band_hz=(0.5, 500.0), duration=4.0, nominal_model=tmf
     )
-    # size = (ΔB (3), Δlog ω, Δlog ζ, Δ²log ω, Δ²log ζ)
-    ok, why = _verdict(TMFPositionDependence(jnp.array([0, 0, 0, 1.2, 0, 0, 0]), 0.0, 1.0), ctx_tmf)
+    # size = (ΔB (3), Δlog ω, Δlog ζ, Δ²B (3), Δ²log ω, Δ²log ζ)
+    up = jnp.array([0, 0, 0, 1.2, 0, 0, 0, 0, 0, 0])
+    ok, why = _verdict(TMFPositionDependence(up, 0.0, 1.0), ctx_tmf)
     assert not ok and "upper end" in why and "band" in why
     # 159 Hz · e^±1.0 = 58 … 432 Hz: inside the band at both ends
-    small = TMFPositionDependence(jnp.array([0, 0, 0, 1.0, 0, 0, 0]), 0.0, 1.0)
+    small = TMFPositionDependence(jnp.array([0, 0, 0, 1.0, 0, 0, 0, 0, 0, 0]), 0.0, 1.0)
     assert _verdict(small, ctx_tmf)[0]
     # a curvature of 1.2 with no slope: 528 Hz at both ends (x² = 1)
-    bent = TMFPositionDependence(jnp.array([0, 0, 0, 0, 0, 1.2, 0]), 0.0, 1.0)
+    bent = TMFPositionDependence(jnp.array([0, 0, 0, 0, 0, 0, 0, 0, 1.2, 0]), 0.0, 1.0)
     assert not _verdict(bent, ctx_tmf)[0]
     ok, why = _verdict(
-        TMFPositionDependence(jnp.array([0, np.inf, 0, 0, 0, 0, 0]), 0.0, 1.0), ctx_tmf
+        TMFPositionDependence(jnp.array([0, np.inf, 0, 0, 0, 0, 0, 0, 0, 0]), 0.0, 1.0), ctx_tmf
     )
     assert not ok and "non-finite" in why
 

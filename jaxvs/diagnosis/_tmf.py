@@ -305,9 +305,10 @@ def _positive(x) -> Positive:
 
 def _position_layout(n_size: int) -> tuple[int, int, int]:
     """`(order + 1, sections, odd poles)` of the TMF behind a position effect's `size`
-    of `n_size` entries: `(2 order + 1)` slopes and `2 (order // 2)` curvatures."""
+    of `n_size` entries: `(2 order + 1)` slopes and `order + 1 + 2 (order // 2)`
+    curvatures."""
     for order in range(1, 64):
-        if 2 * order + 1 + 2 * (order // 2) == n_size:
+        if 3 * order + 2 + 2 * (order // 2) == n_size:
             return order + 1, order // 2, order % 2
     raise ValueError(f"position effect: {n_size} sizes fit no TMF order")
 
@@ -315,24 +316,27 @@ def _position_layout(n_size: int) -> tuple[int, int, int]:
 class TMFPositionEffect(AbstractAdditiveEffect):
     """TMF parameters that change with the other axis' position `y`: the numerator
     `B(σ)`, the log natural frequencies, log damping ratios (and the log real pole) of
-    the nominal TMF move by `x · slope`, and the log frequencies and dampings also by
-    `x² · curvature`, `x = (y − ȳ)/h` with `ȳ`, `h` the centre and half-range of the
-    calibration positions.
+    the nominal TMF move by `x · slope`, and the numerator, log frequencies and dampings
+    also by `x² · curvature`, `x = (y − ȳ)/h` with `ȳ`, `h` the centre and half-range of
+    the calibration positions.
 
     The modal form keeps the TMF stable at every position and every iterate (no root
     of a moved polynomial can cross the imaginary axis); a mode frequency that changes
     by a share per unit travel (a stiffness or an overhang length changing with the
     position, `ω ∝ √(k/m)`) is linear in `log ω` to first order, and the curvature
     holds a change that is not monotonic over the travel (a preload or a guide whose
-    stiffness peaks mid-travel). With two positions the curvature is not identified
-    (`x² = 1` at both: an extrapolation would amplify whatever it took from the
-    nominal model), so it acts only with three positions or more (`curved`).
+    stiffness peaks mid-travel). The numerator bends with the modes: in a modal
+    structure `T = 1 − Σ w_k s² / (s² + 2ζ_k ω_k s + ω_k²)` the numerator's coefficients
+    are those of the denominator's other factors, so a mode whose frequency peaks
+    mid-travel moves them along the same parabola. With two positions the curvature is
+    not identified (`x² = 1` at both: an extrapolation would amplify whatever it took
+    from the nominal model), so it acts only with three positions or more (`curved`).
     """
 
     name: ClassVar[str] = "position_dependence"
     order: ClassVar[int] = 0
     # (ΔB (order + 1), Δlog ω, Δlog ζ, Δlog p) per half-range, then the curvatures
-    # (Δ²log ω, Δ²log ζ) per squared half-range
+    # (Δ²B, Δ²log ω, Δ²log ζ) per squared half-range
     size: Float[Array, " p"]
     centre: Any  # ȳ [m]; never calibrated
     half_range: Any  # h [m]; never calibrated
@@ -346,8 +350,7 @@ class TMFPositionEffect(AbstractAdditiveEffect):
         n1, ns, no = _position_layout(int(self.size.shape[0]))
         p = n1 + 2 * ns + no
         lin, curv = self.size[:p], self.size[p:]
-        zeros = jnp.zeros((n1,), self.size.dtype)
-        curv_full = jnp.concatenate([zeros, curv, jnp.zeros((no,), self.size.dtype)])
+        curv_full = jnp.concatenate([curv, jnp.zeros((no,), self.size.dtype)])
         if not self.curved:
             return x * lin
         return x * lin + x * x * curv_full
@@ -362,7 +365,7 @@ class TMFPositionEffect(AbstractAdditiveEffect):
         # without curvature its entries of `size` are calibrated leaves that act on
         # nothing: not degrees of freedom
         n1, ns, no = _position_layout(int(self.size.shape[0]))
-        return 0 if self.curved else -2 * ns
+        return 0 if self.curved else -(n1 + 2 * ns)
 
     def admissible(self, context):
         """Finite values, and every mode of the TMF inside the analysed band over the
@@ -398,9 +401,10 @@ class TMFPositionEffect(AbstractAdditiveEffect):
         }
         for k in range(ns):  # sections in the nominal's order
             # relative change from the centre to the upper end of the positions
-            out[f"mode_{k + 1}_frequency_change"] = float(np.expm1(s[n1 + k] + s[p + k]))
-            out[f"mode_{k + 1}_damping_change"] = float(np.expm1(s[n1 + ns + k] + s[p + ns + k]))
-            out[f"mode_{k + 1}_log_frequency_curvature"] = float(s[p + k])
+            c = p + n1  # the curvatures of log ω and log ζ
+            out[f"mode_{k + 1}_frequency_change"] = float(np.expm1(s[n1 + k] + s[c + k]))
+            out[f"mode_{k + 1}_damping_change"] = float(np.expm1(s[n1 + ns + k] + s[c + ns + k]))
+            out[f"mode_{k + 1}_log_frequency_curvature"] = float(s[c + k])
         return out
 
 
@@ -698,7 +702,7 @@ def _t_position(ctx: Context) -> list[AbstractEffect]:
     half = max((hi - lo) / 2, 1e-12)
     centre = (lo + hi) / 2
     nom = ctx.model.nominal
-    n_size = int(nom.flat().shape[0]) + 2 * int(nom.log_omega.shape[0])
+    n_size = int(nom.flat().shape[0]) + int(nom.num.shape[0]) + 2 * int(nom.log_omega.shape[0])
     zero = jnp.zeros((n_size,))
     curved = np.unique(np.round(ys, 12)).size >= 3
     starts = [TMFPositionEffect(zero, jnp.asarray(centre), jnp.asarray(half), curved)]
@@ -738,7 +742,7 @@ def _position_start(ctx: Context, x: np.ndarray) -> np.ndarray | None:
     n1, ns = int(nom.num.shape[0]), int(nom.log_omega.shape[0])
     cols = [np.ones_like(x), x] + ([x * x] if distinct >= 3 else [])
     coef, *_ = np.linalg.lstsq(np.stack(cols, axis=1), flats_a, rcond=None)
-    curv = coef[2][n1 : n1 + 2 * ns] if distinct >= 3 else np.zeros(2 * ns)
+    curv = coef[2][: n1 + 2 * ns] if distinct >= 3 else np.zeros(n1 + 2 * ns)
     return np.concatenate([coef[1], curv])
 
 
