@@ -326,36 +326,3 @@ def test_signatures_gate_sensor_delay_and_process_force():
     assert force.parameters()["force_coherence_null_level"] == pytest.approx(0.2)
     lagged = SensorDelay(jnp.asarray(0.4e-3), dt, jnp.array([5e-5, 1e-5]))
     assert lagged.parameters()["phase_delay_before_s"] == pytest.approx(5e-5)
-
-
-@pytest.mark.slow
-def test_sub_sample_sensor_delay_is_found_and_recovered():
-    """A tool-side channel 0.75 samples late (an anti-alias filter's group delay is a
-    fraction of a sample): the delay is admissible, found, and recovered. The plant is
-    the 4/4 TMF simulated on a grid 8 × finer than the record (scipy, zero-order hold of
-    a smooth encoder motion) and shifted by 6 fine samples before the record samples it:
-    a delay that is no augmentation of the library's (no band-limited shift)."""
-    import scipy.signal as ss
-
-    rng = np.random.default_rng(7)
-    os_, n = 8, 4000
-    dt_f = DT / os_
-    ad, bd, cd, dd, _ = ss.cont2discrete(ss.tf2ss(np.asarray(TMF.num), np.asarray(TMF.den)), dt_f)
-    sos = ss.butter(4, 0.35 / DT, fs=1 / dt_f, output="sos")
-    recs = []
-    for _ in range(3):
-        w = rng.standard_normal(n * os_ + 64)
-        xe = ss.sosfilt(sos, w) * 1e-6
-        xe = xe + 2e-5 * np.sin(2 * np.pi * 0.7 * np.arange(xe.size) * dt_f)
-        xt = ss.dlsim((ad, bd, cd, dd, dt_f), xe)[1][:, 0]
-        xt = np.concatenate([np.zeros(6), xt[:-6]])  # 6 fine samples = 0.75 ms late
-        xe_s, xt_s = xe[64::os_][:n], xt[64::os_][:n]
-        xt_s = xt_s + 0.005 * np.std(xt_s) * rng.standard_normal(n)
-        recs.append(jaxvs.data.Record({"x_e": xe_s, "x_t": xt_s}, dt=DT))
-    rep = jaxvs.diagnose(recs, family="tmf")
-    assert rep.verdict["effects"] == ["sensor_delay"]
-    found = next(c for c in rep.candidates if c["effect"] == "sensor_delay")
-    # Oracle: the 0.75 ms shift of the plant. 10 %: the fractional shift of the record's
-    # aliased content (the encoder's motion above Nyquist) biases the estimate slightly
-    assert found["parameters"]["tau_s"] == pytest.approx(0.75e-3, rel=0.10)
-    assert found["parameters"]["phase_delay_before_s"] > 0  # its signature: x_t lags
