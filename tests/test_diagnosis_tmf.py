@@ -12,11 +12,16 @@ import numpy as np
 import pytest
 
 import jaxvs
-from jaxvs.diagnosis._base import fft_delay
+from jaxvs.diagnosis._base import AdmissibilityContext, fft_delay
 from jaxvs.diagnosis._tmf import (
     MissingMode,
+    ProcessForce,
+    SensorDelay,
     StableTMF,
     TMFPositionEffect,
+    coherence_null_level,
+    force_coherence,
+    phase_delay,
 )
 from jaxvs.twins import MachineStructureTwin
 
@@ -241,3 +246,98 @@ def test_null_noise_is_the_noise_not_the_gap_of_an_unmodelled_force():
     # ... but the null adds the noise: estimated on 6000 samples (≈ 1 %) and drawn 4 ×
     # 6000 times; 10 % allows the regression's finite window at the record's start
     assert float(np.mean(added)) == pytest.approx(sigma, rel=0.10)
+
+
+def _multisine(t, rng, f_max, count=400):
+    """A band-limited signal with a closed form at any time `t` [samples]: `count`
+    sinusoids of random frequencies below `f_max` [cycles/sample] and phases."""
+    f = rng.uniform(0.002, f_max, count)
+    ph = rng.uniform(0, 2 * np.pi, count)
+    return np.sin(2 * np.pi * f[None, :] * t[:, None] + ph[None, :]).sum(axis=1)
+
+
+def test_phase_delay_is_the_slope_of_the_cross_spectrum_phase():
+    # Oracle: the closed form. v is the multisine evaluated 2.3 samples later in its own
+    # time (a pure sub-sample delay, no interpolation), plus 10 % noise; the phase of the
+    # cross spectrum is −ωτ, so the weighted slope returns τ
+    rng = np.random.default_rng(1)
+    dt, tau, n = 1e-3, 2.3e-3, 8192
+    k = np.arange(n, dtype=float)
+    u = [_multisine(k, np.random.default_rng(2), 0.4)]
+    v = [_multisine(k - tau / dt, np.random.default_rng(2), 0.4)]
+    v[0] = v[0] + 0.1 * np.std(v[0]) * rng.standard_normal(n)
+    got, se, chi2 = phase_delay(u, v, dt)
+    # Welch's window cuts u and v at the same instants, a 2.3/256 misalignment: its bias
+    # on the phase is below 0.5 % of τ; the standard error is far below that
+    assert got == pytest.approx(tau, rel=5e-3)
+    assert 0 < se < 1e-3 * tau
+    # a pure delay: the phase is linear within its confidence, χ²/dof of order one (the
+    # χ² of ~115 frequencies exceeds 1.5 per degree of freedom with p < 1e-4)
+    assert chi2 < 1.5
+    # the other way round it leads: the sign says which signal is late
+    assert phase_delay(v, u, dt)[0] == pytest.approx(-tau, rel=5e-3)
+    # a phase that is not linear (a lightly damped mode's phase turn at 100 Hz): χ²/dof
+    # far above one. Oracle for the filter: scipy's bilinear discretisation
+    import scipy.signal as ss
+
+    w = 2 * np.pi * 100.0
+    b, a = ss.bilinear([w * w], [1.0, 0.1 * w, w * w], fs=1 / dt)
+    mode = [ss.lfilter(b, a, u[0]) + 0.01 * np.std(u[0]) * rng.standard_normal(n)]
+    assert phase_delay(u, mode, dt)[2] > 100.0
+
+
+def test_force_coherence_matches_scipy_and_its_null_level_holds():
+    import scipy.signal as ss
+
+    rng = np.random.default_rng(5)
+    n, dt = 4096, 1e-3
+    f = rng.standard_normal(n)
+    r = ss.lfilter([0.2], [1.0, -0.8], f) + rng.standard_normal(n)
+    coh, level = force_coherence([r], [f], dt)
+    # Oracle: scipy.signal.coherence of the same pair (same Welch settings), its largest
+    # value below 0.45 of the sampling rate; rounding only
+    fr, c = ss.coherence(r, f, fs=1 / dt, nperseg=256)
+    assert coh == pytest.approx(float(np.max(c[(fr > 0) & (fr < 450.0)])), rel=1e-9)
+    # the level: 1 − (0.05 / frequencies)^(1 / (segments − 1)), 16 segments, 115 bins
+    assert level == pytest.approx(1 - (0.05 / 115) ** (1 / 15), rel=1e-12)
+    assert level == coherence_null_level(16, 115)
+    assert coh > level  # a residual driven by the force is coherent with it
+    # Oracle for the level: Monte Carlo of independent pairs. At most 5 % of them may
+    # exceed it (Bonferroni over the frequencies, and the independent segments counted
+    # without Welch's overlap: conservative); 200 pairs, so 10 exceedances at most
+    exceed = 0
+    for _ in range(200):
+        a, b = rng.standard_normal(n), rng.standard_normal(n)
+        c_ab, lvl = force_coherence([a], [b], dt)
+        exceed += c_ab > lvl
+    assert exceed <= 10
+
+
+def test_signatures_gate_sensor_delay_and_process_force():
+    dt = 1e-3
+    ctx = AdmissibilityContext(record_dt=dt, analysis_dt=dt, band_hz=(0.5, 500.0), duration=4.0)
+
+    def verdict(e):
+        return e.admissible(ctx)
+
+    # a delay of 0.4 samples (an anti-alias filter's group delay) is causal and
+    # admissible; a lag of 0.05 ± 0.01 ms before the fit is its signature (5 standard
+    # errors)
+    assert verdict(SensorDelay(jnp.asarray(0.4e-3), dt)) == (True, None)
+    assert verdict(SensorDelay(jnp.asarray(0.4e-3), dt, jnp.array([5e-5, 1e-5]))) == (True, None)
+    # the measured signal leads the model, or lags it within its noise: no signature
+    for lag in ([-5e-5, 1e-5], [2e-5, 1e-5]):
+        ok, why = verdict(SensorDelay(jnp.asarray(0.4e-3), dt, jnp.array(lag)))
+        assert not ok and "does not lag" in why
+    ok, why = verdict(SensorDelay(jnp.asarray(-0.4e-3), dt))
+    assert not ok and "non-causal" in why
+    # a process force: the residual must be coherent with f above the null level
+    force = ProcessForce(jnp.ones(5), jnp.asarray(1e-8), jnp.asarray(0.0), jnp.array([0.9, 0.2]))
+    assert verdict(force) == (True, None)
+    quiet = ProcessForce(jnp.ones(5), jnp.asarray(1e-8), jnp.asarray(0.0), jnp.array([0.1, 0.2]))
+    ok, why = verdict(quiet)
+    assert not ok and "not coherent" in why
+    # the signatures are reported with the parameters
+    assert force.parameters()["force_coherence_null_level"] == pytest.approx(0.2)
+    lagged = SensorDelay(jnp.asarray(0.4e-3), dt, jnp.array([5e-5, 1e-5]))
+    assert lagged.parameters()["phase_delay_before_s"] == pytest.approx(5e-5)

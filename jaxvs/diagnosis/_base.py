@@ -151,17 +151,22 @@ def check(*rules: tuple[bool, str]) -> Admissible:
     return True, None
 
 
-def delay_rules(tau: float, context: AdmissibilityContext, why: str = "") -> tuple:
+def delay_rules(
+    tau: float, context: AdmissibilityContext, why: str = "", min_samples: float = 1.0
+) -> tuple:
     """The physics of any delay (a force delay, a sensor delay): finite, causal, at least
-    one sample of the record, and short against the record. `why` is appended to the
-    non-causal reason (what cannot act early)."""
+    `min_samples` samples of the record (one: a computed or transported delay; a
+    measurement chain's filter delays its channel by a fraction of a sample, so a sensor
+    delay passes 0), and short against the record. `why` is appended to the non-causal
+    reason (what cannot act early)."""
     return (
         (np.isfinite(tau), "non-finite delay"),
         (tau > 0, f"non-causal delay τ = {1e3 * tau:.3g} ms{why}"),
         (
-            tau >= context.record_dt * (1 - 1e-9),
-            f"delay τ = {1e3 * tau:.3g} ms shorter than one sample "
-            f"({1e3 * context.record_dt:.3g} ms)",
+            tau >= min_samples * context.record_dt * (1 - 1e-9),
+            f"delay τ = {1e3 * tau:.3g} ms shorter than "
+            f"{'one sample' if min_samples == 1 else f'{min_samples:g} samples'} "
+            f"({1e3 * min_samples * context.record_dt:.3g} ms)",
         ),
         (tau < 0.1 * context.duration, f"delay τ = {tau:.3g} s not short against the record"),
     )

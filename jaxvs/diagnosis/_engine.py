@@ -467,8 +467,13 @@ def null_threshold(gains: Sequence[float], level: float, tested: int) -> float:
     the null records, and, since several candidates face the null in one round, at
     least the normal tail quantile `mean + z·sd` at level `1 − (1 − level)/tested`
     (Bonferroni across the candidates tested; the few null records cannot resolve that
-    tail empirically)."""
-    g = np.asarray([v for v in gains if np.isfinite(v)], float)
+    tail empirically).
+
+    A loss on a null record (a fit that made its held-out gap worse, e.g. one stuck in a
+    local minimum away from the effect-free model) counts as no gain: such a fit is never
+    accepted, so it is no false discovery, and its size must not widen the normal tail
+    the candidate has to beat."""
+    g = np.maximum(np.asarray([v for v in gains if np.isfinite(v)], float), 0.0)
     if g.size < 2:
         return float("inf")
     alpha = (1.0 - level) / max(int(tested), 1)

@@ -467,27 +467,56 @@ ZETA_MAX = 0.3
 
 
 class SensorDelay(AbstractEffect):
-    """`x_t` recorded `tau` [s] after the motion it measures (a transport or filter delay)."""
+    """`x_t` recorded `tau` [s] after the motion it measures (a transport or filter delay).
+
+    `lag` holds the delay's signature measured before the fit (never calibrated): the
+    phase delay `(τ_φ, its standard error)` [s] of the measured `x_t` behind the current
+    model's prediction ([`phase_delay`][]); `None` when not measured."""
 
     name: ClassVar[str] = "sensor_delay"
     order: ClassVar[int] = 1
     tau: Float[Array, ""]  # [s]
     dt: float = eqx.field(static=True)
+    lag: Any = None  # (τ_φ, standard error) [s]
 
     def apply(self, y, d, nominal):
         return fft_delay(y, self.tau / self.dt)
 
     def constrained(self):
-        return self
+        if self.lag is None:
+            return self
+        return eqx.tree_at(lambda e: e.lag, self, replace_fn=fixed)
 
     def extra_dof(self, arrays):
         return 0
 
     def admissible(self, context):
-        return check(*delay_rules(_f(self.tau), context))
+        """Finite, causal and short against the record; a fraction of a sample is
+        admissible: the tool-side channel's own measurement chain (an anti-alias filter's
+        group delay, a converter) delays it by less than a sample, and the band-limited
+        shift resolves that."""
+        lag, se = (math.nan, math.nan) if self.lag is None else np.asarray(self.lag, float)
+        return check(
+            *delay_rules(_f(self.tau), context, min_samples=0.0),
+            (
+                not np.isfinite(lag) or lag > LAG_Z * se,
+                f"the measured x_t does not lag the model (phase delay of the cross spectrum "
+                f"{1e3 * lag:.3g} ± {1e3 * se:.2g} ms): no delay's signature",
+            ),
+        )
 
     def parameters(self):
-        return {"tau_s": _f(self.tau)}
+        out = {"tau_s": _f(self.tau)}
+        if self.lag is not None:
+            lag, se = np.asarray(self.lag, float)
+            out["phase_delay_before_s"] = float(lag)
+            out["phase_delay_before_se_s"] = float(se)
+        return out
+
+
+LAG_Z = 3.0
+"""Standard errors by which the signature's phase delay must exceed zero (one-sided,
+p ≈ 0.001): a lag the phase estimate's own noise does not explain."""
 
 
 class ProcessForce(AbstractAdditiveEffect):
@@ -514,6 +543,9 @@ class ProcessForce(AbstractAdditiveEffect):
     size: Float[Array, " n1"]  # N(σ), highest power first, in units of g
     gain: Any  # g [m/N] = RMS(x_t) / RMS(f) of the calibration data; never calibrated
     unbalanced: Any = 0.0  # θ [-]: κ = sigmoid(θ), share of f(0) unbalanced at the start
+    # the signature measured before the fit (never calibrated): the largest coherence of
+    # the residual with f and its null level ([`force_coherence`][]); None: not measured
+    coherence: Any = None
 
     def contribution(self, d, nominal):
         a0 = nominal.scaled_denominator()[-1]
@@ -521,7 +553,9 @@ class ProcessForce(AbstractAdditiveEffect):
         return nominal.simulate(force, num=self.gain * a0 * self.size)
 
     def constrained(self):
-        return eqx.tree_at(lambda e: e.gain, self, replace_fn=fixed)
+        if self.coherence is None:
+            return eqx.tree_at(lambda e: e.gain, self, replace_fn=fixed)
+        return eqx.tree_at(lambda e: (e.gain, e.coherence), self, replace_fn=fixed)
 
     def extra_dof(self, arrays):
         return 0
@@ -531,7 +565,15 @@ class ProcessForce(AbstractAdditiveEffect):
         ok = bool(np.all(np.isfinite(np.asarray(self.size)))) and bool(
             np.isfinite(_f(self.unbalanced))
         )
-        return (True, None) if ok else (False, "non-finite compliance numerator")
+        coh, level = (1.0, 0.0) if self.coherence is None else np.asarray(self.coherence)
+        return check(
+            (ok, "non-finite compliance numerator"),
+            (
+                coh > level,
+                f"the residual is not coherent with the measured force (largest coherence "
+                f"{coh:.3g}, null level {level:.3g}): no process force's signature",
+            ),
+        )
 
     def parameters(self):
         b = np.asarray(self.size)
@@ -539,7 +581,97 @@ class ProcessForce(AbstractAdditiveEffect):
         for i, bi in enumerate(b[::-1][1:], start=1):
             out[f"b{i}"] = float(bi)  # coefficient of σ^i (σ = s / w0), in units of g
         out["unbalanced_share_at_start"] = 0.5 * (1 + math.tanh(0.5 * _f(self.unbalanced)))
+        if self.coherence is not None:
+            coh, level = np.asarray(self.coherence, float)
+            out["force_coherence_before"] = float(coh)
+            out["force_coherence_null_level"] = float(level)
         return out
+
+
+# ------------------------------------------------------------------------------ signatures
+
+
+def _spectra(u: Sequence[np.ndarray], v: Sequence[np.ndarray], dt: float, nperseg: int):
+    """Welch auto and cross spectra `S_uu`, `S_vv`, `S_uv` (scipy's `csd(u, v)`: `E[U* V]`)
+    summed over experiments, and the number of independent segments behind them."""
+    suu = svv = suv = 0.0
+    freq = None
+    segments = 0
+    for a, b in zip(u, v):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        seg = int(min(nperseg, a.size))
+        freq, p = ss.welch(a, fs=1.0 / dt, nperseg=seg)
+        suu = suu + p
+        svv = svv + ss.welch(b, fs=1.0 / dt, nperseg=seg)[1]
+        suv = suv + ss.csd(a, b, fs=1.0 / dt, nperseg=seg)[1]
+        segments += a.size // seg
+    return np.asarray(freq), suu, svv, suv, max(segments, 1)
+
+
+def phase_delay(
+    u: Sequence[np.ndarray],
+    v: Sequence[np.ndarray],
+    dt: float,
+    nperseg: int = 256,
+    min_coherence: float = 0.5,
+) -> tuple[float, float, float]:
+    """The delay of `v` behind `u` from the phase of their cross spectrum: the signature of
+    a delay is a ratio `H = S_uv / S_uu = e^{−jωτ}`, a phase linear in frequency.
+
+    **Arguments:**
+
+    - `u`, `v`: one array per experiment each, of equal lengths per experiment (e.g. a
+        model's prediction and the measured signal).
+    - `dt`: sample time [s].
+    - `nperseg`: Welch segment length [samples].
+    - `min_coherence`: frequencies below this coherence of `u` and `v` (and above 0.45 of
+        the sampling rate) are left out.
+
+    **Returns:**
+
+    `(τ [s], standard error [s], χ²/dof)`: the weighted least-squares slope `−dφ/dω`
+    through the origin of the unwrapped phase, each frequency weighted by the inverse
+    variance of its phase estimate `(1 − γ²) / (2 n_d γ²)` (Bendat & Piersol, random
+    data, eq. 9.52; `n_d` the independent segments), and the reduced χ² of the phase
+    about the line (about 1 when the phase is linear within its confidence). `nan`s when
+    fewer than three frequencies are coherent.
+    """
+    freq, suu, svv, suv, nd = _spectra(u, v, dt, nperseg)
+    coh = np.abs(suv) ** 2 / np.maximum(suu * svv, 1e-300)
+    phase = np.unwrap(np.angle(suv))
+    band = (freq > 0) & (freq < 0.45 / dt) & (coh >= min_coherence)
+    if band.sum() < 3:
+        return math.nan, math.nan, math.nan
+    c = np.clip(coh[band], 1e-12, 1 - 1e-12)
+    w = 2 * np.pi * freq[band]
+    var = (1 - c) / (2 * nd * c)
+    info = float(np.sum(w * w / var))
+    tau = float(-np.sum(w * phase[band] / var) / info)
+    chi2 = float(np.sum((phase[band] + w * tau) ** 2 / var) / (band.sum() - 1))
+    return tau, 1.0 / math.sqrt(info), chi2
+
+
+def coherence_null_level(segments: int, frequencies: int, alpha: float = 0.05) -> float:
+    """The magnitude-squared coherence two independent signals exceed at `frequencies`
+    frequencies with probability `alpha` in all (Bonferroni), from `segments`
+    independent Welch segments: `P(γ̂² > c) = (1 − c)^(n_d − 1)` (Carter, Knapp,
+    Nuttall 1973), so `c = 1 − (alpha / frequencies)^(1 / (n_d − 1))`."""
+    if segments < 2 or frequencies < 1:
+        return 1.0
+    return float(1.0 - (alpha / frequencies) ** (1.0 / (segments - 1)))
+
+
+def force_coherence(
+    residual: Sequence[np.ndarray], force: Sequence[np.ndarray], dt: float, nperseg: int = 256
+) -> tuple[float, float]:
+    """The signature of a process force: the residual is coherent with the measured
+    force. **Returns** `(largest coherence of residual and force below 0.45 of the
+    sampling rate, its null level)` ([`coherence_null_level`][] at 5 % over those
+    frequencies)."""
+    freq, srr, sff, srf, nd = _spectra(residual, force, dt, nperseg)
+    coh = np.abs(srf) ** 2 / np.maximum(srr * sff, 1e-300)
+    band = (freq > 0) & (freq < 0.45 / dt)
+    return float(np.max(coh[band])), coherence_null_level(nd, int(band.sum()))
 
 
 # ------------------------------------------------------------------------------ templates
@@ -639,8 +771,14 @@ def _t_mode(ctx: Context) -> list[AbstractEffect]:
 
 def _t_delay(ctx: Context) -> list[AbstractEffect]:
     dt = ctx.experiments[0].dt
-    # heuristic: up to ~1.5 samples a delay is absorbed by the TMF's numerator
-    return [SensorDelay(jnp.asarray(k * dt), dt) for k in (1.5, 3.0, 6.0)]
+    # The cost is not unimodal in τ: the encoder samples without an anti-alias filter, so
+    # the content it aliases is shifted by the wrong phase by any fractional delay and the
+    # cost has local minima about a sample apart; and the TMF's numerator absorbs part of
+    # a delay. Starts from half a sample (a filter's group delay) to six samples; the best
+    # admissible fit by calibration cost is kept.
+    pred = [e.y - np.asarray(r) for e, r in zip(ctx.experiments, ctx.residuals)]
+    lag = jnp.asarray(phase_delay(pred, [e.y for e in ctx.experiments], dt)[:2])
+    return [SensorDelay(jnp.asarray(k * dt), dt, lag) for k in (0.5, 1.5, 3.0, 6.0)]
 
 
 def _t_force(ctx: Context) -> list[AbstractEffect]:
@@ -651,7 +789,10 @@ def _t_force(ctx: Context) -> list[AbstractEffect]:
         return []
     gain = float(np.sqrt(np.mean(xt**2))) / fr
     n1 = int(ctx.model.nominal.num.shape[0])
-    return [ProcessForce(jnp.zeros(n1), jnp.asarray(gain), jnp.asarray(0.0))]
+    dt = ctx.experiments[0].dt
+    forces = [np.asarray(e.arrays["f"]) for e in ctx.experiments]
+    coherence = jnp.asarray(force_coherence(ctx.residuals, forces, dt))
+    return [ProcessForce(jnp.zeros(n1), jnp.asarray(gain), jnp.asarray(0.0), coherence)]
 
 
 def _needs_positions(experiments: Sequence[Experiment]) -> str | None:
