@@ -42,9 +42,9 @@ from jaxvs.diagnosis._tmf import (
     MissingMode,
     ProcessForce,
     SensorDelay,
-    StableTMF,
     TMFPositionEffect as TMFPositionDependence,
 )
+from jaxvs.models import StableTMF
 from jaxvs.twins import DriveTwin
 
 # A drive record at 1 kHz analysed up to 100 Hz, 2 µm encoder, 0.2 m of travel.
@@ -418,7 +418,7 @@ def test_tmf_null_noise_is_the_records_noise_despite_a_ringing_mode():
     import scipy.signal as ss
 
     from jaxvs.diagnosis._base import GapModel
-    from jaxvs.diagnosis._tmf import StableTMF, TMFFamily
+    from jaxvs.diagnosis._tmf import TMFFamily
 
     dt, n, sigma = 1e-3, 6000, 2e-8
     w1, w2 = 2 * math.pi * 15.0, 2 * math.pi * 160.0

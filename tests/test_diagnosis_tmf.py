@@ -17,12 +17,12 @@ from jaxvs.diagnosis._tmf import (
     MissingMode,
     ProcessForce,
     SensorDelay,
-    StableTMF,
     TMFPositionEffect,
     coherence_null_level,
     force_coherence,
     phase_delay,
 )
+from jaxvs.models import StableTMF
 from jaxvs.twins import MachineStructureTwin
 
 DT = 1e-3

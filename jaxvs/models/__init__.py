@@ -94,5 +94,9 @@ from .thermal import (
     TimeDelayNetwork as TimeDelayNetwork,
 )
 from .tmf import (
+    StableTMF as StableTMF,
     VirtualSensor as VirtualSensor,
+    partial_fractions as partial_fractions,
+    section_poles as section_poles,
+    simulate_modal as simulate_modal,
 )
