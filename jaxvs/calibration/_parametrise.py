@@ -25,6 +25,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
 from .._misc import as_real, concrete
+from ..models import pole_sections
 
 __all__ = [
     "AbstractParameter",
@@ -276,19 +277,6 @@ def _polymul(a: Array, b: Array) -> Array:
     return out
 
 
-def _sections_from_poles(poles: np.ndarray) -> tuple[list, list, list]:
-    """Pair stable poles into (ω, ζ) sections plus at most one real pole."""
-    tol = 1e-9 * max(1.0, float(np.max(np.abs(poles))))
-    upper = sorted((p for p in poles if p.imag > tol), key=lambda p: abs(p))
-    real = sorted(float(p.real) for p in poles if abs(p.imag) <= tol)
-    omegas, zetas = [abs(p) for p in upper], [-p.real / abs(p) for p in upper]
-    while len(real) >= 2:
-        a, b = -real.pop(0), -real.pop(0)
-        omegas.append(np.sqrt(a * b))
-        zetas.append((a + b) / (2 * np.sqrt(a * b)))
-    return omegas, zetas, [-r for r in real]
-
-
 def stable_denominator(den: ArrayLike) -> StableDenominator:
     """Reparametrise a stable denominator (highest power first) as second-order sections.
 
@@ -336,7 +324,7 @@ def stable_denominator(den: ArrayLike) -> StableDenominator:
                 f"{poles[poles.real >= 0]} have real part >= 0). Reflect them into the "
                 "left half-plane (p -> -conj(p)) or start from a stable guess."
             )
-        omegas, zetas, reals = _sections_from_poles(poles)
+        omegas, zetas, reals = pole_sections(poles)
         lw[idx], lz[idx], lp[idx], lead[idx] = np.log(omegas), np.log(zetas), np.log(reals), d[0]
     dtype = as_real(den, "stable_denominator").dtype
     return StableDenominator(*(jnp.asarray(a, dtype) for a in (lw, lz, lp, lead)))

@@ -97,6 +97,7 @@ from .tmf import (
     StableTMF as StableTMF,
     VirtualSensor as VirtualSensor,
     partial_fractions as partial_fractions,
+    pole_sections as pole_sections,
     section_poles as section_poles,
     simulate_modal as simulate_modal,
 )

@@ -3,6 +3,7 @@
 from ._stable import (
     StableTMF as StableTMF,
     partial_fractions as partial_fractions,
+    pole_sections as pole_sections,
     section_poles as section_poles,
     simulate_modal as simulate_modal,
 )

@@ -21,7 +21,7 @@ from jaxtyping import Array, Float
 
 from ..lti import RationalTF
 
-__all__ = ["StableTMF", "partial_fractions", "section_poles", "simulate_modal"]
+__all__ = ["StableTMF", "partial_fractions", "pole_sections", "section_poles", "simulate_modal"]
 
 
 def _f(x) -> float:
@@ -36,8 +36,11 @@ def _polymul(a: Array, b: Array) -> Array:
     return out
 
 
-def _sections_from_poles(poles: np.ndarray) -> tuple[list[float], list[float], list[float]]:
-    """Pair stable poles into (ω, ζ) sections plus at most one real pole (all > 0)."""
+def pole_sections(poles: np.ndarray) -> tuple[list[float], list[float], list[float]]:
+    """Pair stable poles into second-order sections `(ω, ζ)` plus at most one real pole
+    `p`, all > 0 (two real poles `−a`, `−b` become `ω = √(ab)`, `ζ = (a + b)/(2√(ab))`).
+
+    **Returns:** `(omegas, zetas, reals)` [rad/s, −, rad/s], sections by increasing `|pole|`."""
     tol = 1e-9 * max(1.0, float(np.max(np.abs(poles))))
     upper = sorted((p for p in poles if p.imag > tol), key=abs)
     real = sorted(float(p.real) for p in poles if abs(p.imag) <= tol)
@@ -233,7 +236,7 @@ class StableTMF(eqx.Module):
         num = np.concatenate([np.zeros(n + 1 - num.size), num])
         poles = np.roots(den)
         poles = np.where(poles.real >= 0, -np.abs(poles.real) - 1e-3 * w0 + 1j * poles.imag, poles)
-        omegas, zetas, reals = _sections_from_poles(poles / w0)
+        omegas, zetas, reals = pole_sections(poles / w0)
         powers = w0 ** np.arange(0, n + 1, dtype=float)
         num_s = num / den[0] / powers
         return cls(
