@@ -1,4 +1,4 @@
-# Two commands on a fresh machine: `make demo` and `make test` (DESIGN.md §3.1).
+# Two commands on a fresh machine: `make demo` and `make test` (docs/guides/contracts.md).
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python

@@ -1,10 +1,10 @@
-"""Blind plants for the sim-to-real diagnosis benchmark (issue 14, item 6).
+"""Blind plants for the sim-to-real diagnosis benchmark.
 
-Records of the three families of DESIGN.md §3.2 (drive, tmf, thermal) from plants written
-here with numpy/scipy only -- no jaxvs model, twin or diagnosis code is used to make the
-data, so the diagnosis cannot be tuned to them. Every effect of the effect-name table is
-built in at least two structurally different ways, and differently from the library's
-augmentations and from `jaxvs.twins`:
+Records of the three diagnosis families (drive, tmf, thermal; docs/guides/contracts.md)
+from plants written here with numpy/scipy only -- no jaxvs model, twin or diagnosis code is
+used to make the data, so the diagnosis cannot be tuned to them. Every effect of the
+effect-name table is built in at least two structurally different ways, and differently
+from the library's augmentations and from `jaxvs.twins`:
 
 drive (a rigid axis `M q̈ + Fv q̇ + offset = u` is the nominal model):
 - `coulomb_friction`: (A) Karnopp stick-slip with a zero-velocity band; (B) Dahl
@@ -84,7 +84,7 @@ class Case:
 
     - `name`: unique, stable identifier (also the seed's source).
     - `family`: `"drive"`, `"tmf"` or `"thermal"`.
-    - `effects`: the effects built into the plant (DESIGN.md §3.2 names); empty when the
+    - `effects`: the effects built into the plant (the diagnosis's effect names); empty when the
         family's nominal model is exact.
     - `primary`: the effect that dominates the gap (`None` when effect-free).
     - `primary_alternatives`: other effects that are an equally right primary answer (for

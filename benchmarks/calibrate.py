@@ -1,4 +1,4 @@
-"""Benchmark: rational TMF fits with `jaxvs.fit_rational` (DESIGN.md §5, "Calibration engine").
+"""Benchmark: rational TMF fits with `jaxvs.fit_rational` against a scipy loop.
 
 Three measurements in ONE run on the same CPU:
 

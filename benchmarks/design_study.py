@@ -1,4 +1,4 @@
-"""The virtual-sensor design assistant (issue 16) on the spindle twin and on real data.
+"""The virtual-sensor design assistant on the spindle twin and on real data.
 
 1. **Recovery** on a `SpindleThermalTwin` with inner-ring dynamics and Palmgren-like
    friction heat (the thermal study's twin): records with the true inputs (`T_chassis`,

@@ -1,4 +1,4 @@
-"""Drive study (issue 6): batched nonlinear drive simulation against a SciPy loop, Bode of
+"""Drive study: batched nonlinear drive simulation against a SciPy loop, Bode of
 the position loop from simulated and measured data, CWT damping against FRF-fit damping.
 
 1. **256 variants in one call.** A cascade-controlled two-mass feed drive (P position loop,
@@ -220,7 +220,7 @@ def damping_study() -> dict:
 
 def markdown(res: dict) -> str:
     b = res["batched"]
-    lines = ["# Drive study (issue 6)", "", "## 256 drive variants in one call", ""]
+    lines = ["# Drive study", "", "## 256 drive variants in one call", ""]
     lines.append(
         f"Two-mass cascade drive (PI velocity loop, current lag, smooth Coulomb friction), "
         f"trapezoidal 50 mm move, {b['n_samples']} samples at 1 kHz, {b['n_variants']} "

@@ -56,7 +56,7 @@ PUBLISHED_SIMULATION = {
 ROOT = Path(__file__).resolve().parent
 DEFAULT_DATA = ROOT.parent.parent / "shared" / "data" / "EMPS"
 
-# Description §3.4 and DESIGN.md §4 (MATLAB Script_IDIM_LS / Script_IDIM_LS_CTV output).
+# EMPS description §3.4 (MATLAB Script_IDIM_LS / Script_IDIM_LS_CTV output).
 PUBLISHED = {
     "coulomb_viscous": {
         "params": {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "offset": -3.1648},

@@ -23,8 +23,7 @@ that part's first 20 samples); the structure with the lowest held-out RMSE is th
 once on the test file.
 
 Reference rows: the published IDIM-LS parameters (description §3.4) through the same
-simulator, and the published black-box networks (identibench / tsfast tables, as quoted in
-jaxvs issue 18).
+simulator, and the published black-box networks (identibench / tsfast tables).
 
 Writes `benchmarks/results/emps_official.json` and `.md`.
 Run: `python benchmarks/emps_official.py [--data PATH] [--quick]`.

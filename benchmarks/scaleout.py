@@ -1,4 +1,4 @@
-"""Benchmark: scale-out of families over host devices with `jax.sharding` (issue 8).
+"""Benchmark: scale-out of families over host devices with `jax.sharding`.
 
 This machine has 2 CPU cores. XLA exposes them as 2 host devices when
 `XLA_FLAGS=--xla_force_host_platform_device_count=2` is set before JAX starts (done at the

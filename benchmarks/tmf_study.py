@@ -1,5 +1,5 @@
-"""The TMF virtual-sensor study (Doerrer et al. 2022, study 002) end to end, on the
-machine-structure twin (issue 5).
+"""The TMF virtual-sensor study (Doerrer et al. 2022) end to end, on the
+machine-structure twin.
 
 1. **Analytic checks.** A three-mass chain: `OscillatorChain.tmf` (linear solve) and
    `transmissibility_model` (exact `RationalTF`) against hand-derived closed forms of
@@ -1038,7 +1038,7 @@ def main(argv=None):
     name = "tmf_study_quick" if quick else "tmf_study"
     if args.markdown_only:
         res = json.loads((out / f"{name}.json").read_text())
-        (out / f"{name}.md").write_text("# TMF virtual-sensor study (issue 5)\n\n" + markdown(res))
+        (out / f"{name}.md").write_text("# TMF virtual-sensor study\n\n" + markdown(res))
         return res
     t_start = time.perf_counter()
     load0 = os.getloadavg()
@@ -1074,7 +1074,7 @@ def main(argv=None):
     print(md)
     out.mkdir(exist_ok=True)
     (out / f"{name}.json").write_text(json.dumps(res, indent=2, default=float) + "\n")
-    (out / f"{name}.md").write_text("# TMF virtual-sensor study (issue 5)\n\n" + md)
+    (out / f"{name}.md").write_text("# TMF virtual-sensor study\n\n" + md)
     return res
 
 

@@ -1,4 +1,4 @@
-"""Generate the docs page "What jaxvs refuses" from the bad-input matrix (issue 15).
+"""Generate the docs page "What jaxvs refuses" from the bad-input matrix.
 
 The matrix is the parametrised tests `tests/test_bad_input_*.py` (row format in
 `tests/bad_input.py`): every row records its outcome -- refused (with the message) or handled
@@ -6,8 +6,8 @@ correctly -- as one JSON line when `JAXVS_MATRIX_OUT` is set. This script runs t
 with the variable set (or reads a JSONL file given with `--jsonl`), and writes
 
 - `docs/guides/refusals.md`: the counts, then per area a table case | input | message;
-- the counts, as a short paragraph between the markers `<!-- refusals:start -->` and
-  `<!-- refusals:end -->` of `README.md` (with `--readme`).
+- the counts, as one cell of the headline table of `README.md`, between the markers
+  `<!-- refusals:start -->` and `<!-- refusals:end -->` (with `--readme`).
 
 Counts: *refused with a message* (the row's exception and a message naming the problem and
 the fix), *handled correctly* (a legal borderline input and a check of the answer),
@@ -133,7 +133,7 @@ def page(rows: list[dict], bad: dict[str, str]) -> str:
     lines = [
         "# What jaxvs refuses",
         "",
-        "jaxvs checks what it is given (DESIGN.md §6): a bad file, array or option is refused",
+        "jaxvs checks what it is given: a bad file, array or option is refused",
         "with a message that names the problem and the fix, never turned into a silently wrong",
         "answer; a borderline input that is legal is handled correctly. This page lists every",
         "row of the bad-input matrix, the parametrised tests `tests/test_bad_input_*.py`, with",
@@ -187,18 +187,13 @@ def page(rows: list[dict], bad: dict[str, str]) -> str:
 
 
 def readme_paragraph(rows: list[dict], bad: dict[str, str]) -> str:
+    """The counts as one table cell, between the markers in the README's headline table."""
     n = counts(rows, bad)
     return (
-        f"{START}\n"
-        f"**Bad input.** Of {n['total']} bad or borderline inputs in the bad-input matrix "
-        f"(`tests/test_bad_input_*.py`, run in CI), {n['refused']} "
-        f"({percent(n['refused'], n['total'] - n['handled'])} of those that must be refused) are "
-        f"refused with a message naming the problem and the fix, {n['handled']} borderline "
-        f"but legal inputs are handled correctly, {n['silently_wrong']} give a "
-        f"silently wrong answer and {n['crashes']} crash. The loaders are also fuzzed "
-        "(hypothesis: random bytes, truncations, cell edits). Every case and its message: "
-        "[What jaxvs refuses](docs/guides/refusals.md).\n"
-        f"{END}"
+        f"{START}{n['refused']} of {n['total'] - n['handled']} bad inputs refused with a message "
+        f"naming the problem and the fix ({percent(n['refused'], n['total'] - n['handled'])}), "
+        f"{n['handled']} borderline inputs handled correctly, {n['silently_wrong']} silently "
+        f"wrong, {n['crashes']} crashes{END}"
     )
 
 
@@ -207,7 +202,7 @@ def update_readme(text: str) -> None:
     if START in readme and END in readme:
         readme = re.sub(re.escape(START) + r".*?" + re.escape(END), text, readme, flags=re.S)
     else:
-        readme = readme.rstrip("\n") + "\n\n## Reliability: bad input\n\n" + text + "\n"
+        raise SystemExit(f"{README}: the markers {START} ... {END} are missing; put them in a cell")
     README.write_text(readme, encoding="utf-8")
 
 

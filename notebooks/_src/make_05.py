@@ -14,7 +14,7 @@ cells = [
         "EMPS force pulses), with circular-shift permutation p-values that respect the "
         "residual's autocorrelation and Benjamini–Hochberg control of false discoveries.\n"
         "2. **Which** unmodelled effect causes it? Every candidate of the family's library "
-        "(DESIGN.md §3.2) is a differentiable augmentation of the nominal model that equals it "
+        "(the effect names of the Contracts page) is a differentiable augmentation of the nominal model that equals it "
         "at zero size; each is added and the whole model is recalibrated by "
         "Levenberg–Marquardt. A candidate is accepted only when its best fit is physically "
         "admissible (a causal delay, a gap above the encoder step, a lightly damped mode, "
