@@ -25,6 +25,7 @@ from ._simulate import simulate as simulate
 from .drive import (
     AbstractActuator as AbstractActuator,
     AbstractFriction as AbstractFriction,
+    ActuatorSaturation as ActuatorSaturation,
     AbstractMechanics as AbstractMechanics,
     AsymmetricFriction as AsymmetricFriction,
     BallbarResult as BallbarResult,
