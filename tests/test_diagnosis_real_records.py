@@ -148,5 +148,6 @@ def test_one_out_and_back_move_is_diagnosed_not_refused():
     rep = jaxvs.diagnose(rec, family="drive", max_effects=2)
     assert rep["not_identifiable"] is None
     assert rep.verdict["primary"] == "coulomb_friction"
-    assert rep.verdict["parameters"]["coulomb_friction"]["Fc"] == pytest.approx(truth["Fc"], rel=0.1)
-    assert rep.verdict["parameters"]["nominal"]["M"] == pytest.approx(truth["M"], rel=0.05)
+    found = rep.verdict["parameters"]
+    assert found["coulomb_friction"]["Fc"] == pytest.approx(truth["Fc"], rel=0.1)
+    assert found["nominal"]["M"] == pytest.approx(truth["M"], rel=0.05)
