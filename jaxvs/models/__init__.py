@@ -25,8 +25,8 @@ from ._simulate import simulate as simulate
 from .drive import (
     AbstractActuator as AbstractActuator,
     AbstractFriction as AbstractFriction,
-    ActuatorSaturation as ActuatorSaturation,
     AbstractMechanics as AbstractMechanics,
+    ActuatorSaturation as ActuatorSaturation,
     AsymmetricFriction as AsymmetricFriction,
     BallbarResult as BallbarResult,
     BallScrew as BallScrew,
