@@ -1161,7 +1161,13 @@ class DriveFamily(AbstractFamily):
             mass: Any = jnp.asarray(th[0])
             fv, off = th[1], th[2]
         else:
-            mass = float(self.options.get("mass") or 0.0)
+            mass = self.options.get("mass") or 0.0
+            if isinstance(mass, bool) or not isinstance(mass, int | float) or not mass >= 0:
+                raise ValueError(
+                    f"diagnose(drive): the mass option must be a moving mass >= 0 kg; got "
+                    f"{mass!r}."
+                )
+            mass = float(mass)
             (fv, off), *_ = np.linalg.lstsq(np.stack([v, one], -1), y - mass * a, rcond=None)
             source = "the mass option" if self.options.get("mass") else "zero"
             self.nominal_warnings.append(
