@@ -24,6 +24,10 @@ drive (a rigid axis `M q̈ + Fv q̇ + offset = u` is the nominal model):
   (B) a gravity-like constant load switched on and off.
 - `position_dependence`: (A) cogging ripple (two harmonics of a magnet pitch);
   (B) a wavy inclined guideway (gravity) plus a cable-carrier spring.
+- `saturation`: (A) current limit: the amplifier clips the held command of the digital
+  cascade at ±F_max (hard clip, integrator wind-up; the logger records the command);
+  (B) a lagged amplifier: the command passes a first-order current loop (τ of 0.5–1 ms)
+  before the clip.
 
 tmf (root-excited beam, modal sum; the nominal is one 4/4 rational TMF):
 - `position_dependence`: (A) overhang `L(y)`, every mode scales with `1/L²`; (B) joint
@@ -235,6 +239,10 @@ def simulate_drive(p: dict, r_ctrl: np.ndarray | None, u_ol: np.ndarray | None, 
             return fc + (fs - fc) / (1 + z * z)
         return fc + (fs - fc) * math.exp(-(z**delta))
 
+    f_lim = p.get("force_limit", math.inf)  # amplifier limit [N] on the applied force
+    tau_i = p.get("current_tau", 0.0)  # first-order current loop before the limit [s]
+    i_dec = math.exp(-h / tau_i) if tau_i > 0 else 0.0
+    i_amp = 0.0
     ext = p.get("external")  # callable t -> force, or None
     posf = p.get("position_force")  # callable x -> force, or None
     tau_steps = int(p.get("transport_steps", 0))
@@ -296,7 +304,10 @@ def simulate_drive(p: dict, r_ctrl: np.ndarray | None, u_ol: np.ndarray | None, 
                 v_raw = (qv - q_prev) / Tc if k_ctrl > 0 else 0.0
                 v_est = alpha_v * v_est + (1 - alpha_v) * v_raw
                 ev = Kp * (rk - qk) + v_ref - v_est
-                integ += ev * Tc
+                # anti-wind-up of a limited amplifier: no integration while the command is
+                # beyond the limit and the error drives it further (clamping)
+                if not (abs(u_cmd) > f_lim and ev * u_cmd > 0):
+                    integ += ev * Tc
                 u_cmd = Kv * (ev + integ / Ti) + kff * a_ref
             else:
                 u_cmd = float(u_ol[k_ctrl])
@@ -311,7 +322,11 @@ def simulate_drive(p: dict, r_ctrl: np.ndarray | None, u_ol: np.ndarray | None, 
             xm_log[i] = xm
             xl_log[i] = xl
         hist.append(u_hold)
-        F = hist.pop(0) - off
+        F = hist.pop(0)
+        if f_lim < math.inf:
+            i_amp = F + (i_amp - F) * i_dec  # exact for a held input (0: no lag)
+            F = min(max(i_amp, -f_lim), f_lim)
+        F -= off
         if ext is not None:
             F += ext(t)
         if structure == "rigid":
@@ -520,6 +535,11 @@ def _drive_params(case: Case, rng: np.random.Generator) -> tuple[dict, dict]:
         d = int(rng.integers(2, 4))
         p["ctrl_delay"] = d
         truth["delay"] = d / s["fs_ctrl"]
+    if "currentlimit" in v:
+        # the limit itself is set from the calibration moves (`_drive_records`)
+        p["limit_exceeded"] = float(rng.uniform(0.005, 0.015))
+        if "lag" in v:
+            p["current_tau"] = float(rng.uniform(0.5e-3, 1e-3))
     return p, truth
 
 
@@ -613,11 +633,29 @@ def _drive_records(case: Case) -> tuple[list[Record], list[Record], dict]:
     posf, ptruth = _drive_position(case, rng, amp, force_scale, M)
     p["position_force"] = posf
     truth.update({f"position_{k}": v for k, v in ptruth.items()})
-    recs = []
-    for role, n_rec, kind in (
+    roles = (
         ("calibration", s["n_cal"], s.get("ref_cal", "p2p")),
         ("validation", s["n_val"], s.get("ref_val", "sine")),
-    ):
+    )
+    refs: dict[str, np.ndarray] = {}
+    if "limit_exceeded" in p:
+        # the amplifier limit: the force that the moves of each experiment ask for
+        # (rigid-body feedforward of the references) on 0.5-1.5 % of their samples, the lower
+        # of the two, so that both reach it
+        peaks = []
+        for role, n_rec, kind in roles:
+            dtc = 1.0 / fsc
+            r = _drive_reference(
+                kind, rng, int(math.ceil(n_rec * fsc / s["fs_rec"])), dtc, amp, t_move
+            )
+            vr = np.gradient(r, dtc)
+            need = np.abs(M * np.gradient(vr, dtc) + p["Fv"] * vr)
+            peaks.append(float(np.quantile(need, 1.0 - p["limit_exceeded"])))
+            refs[role] = r
+        p["force_limit"] = min(peaks)
+        truth["F_max"] = p["force_limit"]
+    recs = []
+    for role, n_rec, kind in roles:
         ratio = fsc / s["fs_rec"]
         n_ctrl = int(math.ceil(n_rec * ratio))
         dtc = 1.0 / fsc
@@ -626,7 +664,7 @@ def _drive_records(case: Case) -> tuple[list[Record], list[Record], dict]:
         if role == "calibration":
             truth.update({f"external_{k}": v for k, v in etruth.items()})
         if closed:
-            r = _drive_reference(kind, rng, n_ctrl, dtc, amp, t_move)
+            r = refs[role] if refs else _drive_reference(kind, rng, n_ctrl, dtc, amp, t_move)
             out = simulate_drive(p, r, None, rng)
         else:
             r = _drive_reference(kind, rng, n_ctrl, dtc, amp, t_move)
@@ -1080,12 +1118,13 @@ def _h(name, effects, variant, primary=None, alt=(), **settings):
 
 CF, AF, SF, BL = "coulomb_friction", "asymmetric_friction", "stribeck_friction", "backlash"
 RS, TD, EF, PD = "resonance", "time_delay", "external_force", "position_dependence"
+SA = "saturation"
 MM, SD, PF = "missing_mode", "sensor_delay", "process_force"
 DY, AT, CT, SN = "dynamics", "ambient_temperature", "coolant_temperature", "speed_nonlinearity"
 
 
 def cases() -> list[Case]:
-    """The deterministic list of blind cases (52: 15 effect-free)."""
+    """The deterministic list of blind cases (55: 16 effect-free)."""
     robot = dict(fs_rec=10, fs_ctrl=200, resolution=2e-5, speed=0.05, t_move=4.0)
     robot.update(n_cal=3000, n_val=1500, noise_u=0.3)
     drive = [
@@ -1236,7 +1275,29 @@ def cases() -> list[Case]:
         ),
         _d("two-coulomb-cogging", [CF, PD], "dahl-cogging", alt=(PD,), fs_rec=1000, fs_ctrl=1000),
         _d("two-pulses-delay", [EF, TD], "pulses-ctrl_delay", alt=(TD,), fs_rec=1000, fs_ctrl=1000),
+        _d(
+            "saturation-current-limit",
+            [SA],
+            "currentlimit",
+            fs_rec=1000,
+            fs_ctrl=2000,
+            ref_val="p2p",
+        ),
+        _d(
+            "saturation-slow-amplifier",
+            [SA],
+            "currentlimit-lag",
+            ref_val="p2p",
+            fs_rec=2000,
+            fs_ctrl=2000,
+            nsub=2,
+            noise_rho=0.9,
+            n_cal=14000,
+            n_val=7000,
+        ),
         _d("free-1khz", [], "none", fs_rec=1000, fs_ctrl=1000),
+        # the current-limit case without its limit (same settings, its own seed)
+        _d("free-current-limit-twin", [], "none", fs_rec=1000, fs_ctrl=2000, ref_val="p2p"),
         _d(
             "free-10khz-held",
             [],

@@ -36,6 +36,7 @@ DESIGN_EFFECTS = {
         "time_delay",
         "external_force",
         "position_dependence",
+        "saturation",
     ),
     "tmf": ("position_dependence", "missing_mode", "sensor_delay", "process_force"),
     "thermal": ("dynamics", "ambient_temperature", "coolant_temperature", "speed_nonlinearity"),

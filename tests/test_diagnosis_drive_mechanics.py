@@ -182,7 +182,10 @@ def test_a_position_force_does_not_make_the_mass_unidentifiable():
     exp = fam.prepare(Record({"q": q, "u": u}, dt=1 / fs), "incline")
     model = GapModel(fam.nominal([exp]))
     assert fam.identifiability([exp], model) is None
-    # a force unrelated to the motion (noise only) still leaves the mass undetermined
+    assert not isinstance(model.nominal.M, float)  # calibrated, not fixed
+    # a force unrelated to the motion (noise only) leaves the mass undetermined: it is
+    # fixed at zero with a warning, and the record is not refused
     flat = fam.prepare(Record({"q": q, "u": 10 + rng.standard_normal(n)}, dt=1 / fs), "flat")
-    why = fam.identifiability([flat], GapModel(fam.nominal([flat])))
-    assert why is not None and "mass" in why
+    nominal = fam.nominal([flat])
+    assert nominal.M == 0.0 and "mass is fixed" in fam.nominal_warnings[0]
+    assert fam.identifiability([flat], GapModel(nominal)) is None

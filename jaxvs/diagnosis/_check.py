@@ -11,7 +11,10 @@ Blocking findings (exit code 3 of `jaxvs check`): a family's preprocessing refus
 records (too short, no motion, constant input), drives that move in one direction only,
 or a Jacobian whose smallest column-scaled singular value is below `1e-6` of the largest
 (heuristic: at that conditioning float64 least squares loses ten digits, so the
-combination's estimate is noise). Everything else is reported as a warning.
+combination's estimate is noise) or below the family's own `singular_rtol` (the drive
+family's `1e-3`, the threshold its diagnosis refuses at). Everything else is reported as
+a warning, and so are the family's `nominal_warnings` (a drive record that does not
+excite the inertia: the mass is fixed and the diagnosis goes on).
 """
 
 from __future__ import annotations
@@ -231,7 +234,9 @@ def _parameter_names(nominal: eqx.Module) -> list[str]:
     return names
 
 
-def _jacobian_report(nominal: eqx.Module, experiments: Sequence[Any]) -> dict[str, Any]:
+def _jacobian_report(
+    nominal: eqx.Module, experiments: Sequence[Any], rtol: float = _SINGULAR_RTOL
+) -> dict[str, Any]:
     params, static = eqx.partition(nominal, eqx.is_inexact_array)
     flat, unravel = jax.flatten_util.ravel_pytree(params)
 
@@ -253,7 +258,7 @@ def _jacobian_report(nominal: eqx.Module, experiments: Sequence[Any]) -> dict[st
     }
     for k, sv in enumerate(s):
         rel = sv / smax if smax > 0 else 0.0
-        if rel < _SINGULAR_RTOL:
+        if rel < rtol:
             direction = vt[k] / np.max(np.abs(vt[k]))
             combo = {n: float(w) for n, w in zip(names, direction) if abs(w) > 0.05}
             out["unidentifiable"].append({"relative": float(rel), "combination": combo})
@@ -331,13 +336,24 @@ def check_records(
             raise
         blocking.append(f"the family's preprocessing refuses the records: {error}")
     else:
-        ident = _jacobian_report(nominal, experiments)
+        # a family states its own threshold and what to record for each parameter, so
+        # that `jaxvs check` refuses exactly what the diagnosis refuses; parameters the
+        # family fixed (a mass a friction rig does not excite) are no Jacobian column,
+        # and the fixing is a warning
+        warnings += list(getattr(fam, "nominal_warnings", ()))
+        ident = _jacobian_report(
+            nominal, experiments, getattr(fam, "singular_rtol", _SINGULAR_RTOL)
+        )
         content["jacobian"] = ident
+        advice = getattr(fam, "record_advice", {})
         for combo in ident["unidentifiable"]:
             terms = ", ".join(f"{n} ({w:+.2f})" for n, w in combo["combination"].items())
+            worst = max(combo["combination"], key=lambda n: abs(combo["combination"][n]))
+            todo = f" To identify {worst}: {advice[worst]}." if worst in advice else ""
             blocking.append(
                 f"the nominal model's parameter combination of {terms} is not identifiable "
-                f"from these records (singular value {combo['relative']:.1e} of the largest)."
+                f"from these records (singular value {combo['relative']:.1e} of the "
+                f"largest).{todo}"
             )
     content["identifiable"] = not blocking
     return CheckReport(content)

@@ -166,7 +166,8 @@ def diagnose(
     - `seed`: seed of the bootstrap and the gap-map permutations.
     - `progress`: print progress to stderr.
     - `**options`: family options (drive: `cutoff_hz`, `decimation`,
-      `friction_sharpness`, `zoh_force`; tmf: `order`; thermal: see the family).
+      `friction_sharpness`, `zoh_force`, `mass` (the moving mass used when the record does
+      not excite the inertia); tmf: `order`; thermal: see the family).
 
     **Returns:**
 

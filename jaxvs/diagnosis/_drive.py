@@ -18,6 +18,7 @@ Each candidate effect is a differentiable augmentation that is zero at zero size
 | `time_delay` | the whole prediction advanced by `τ` (force acting `τ` after it is commanded) |
 | `external_force` | force pulses at events found in the residual (amplitude per event) |
 | `position_dependence` | `Σ c_k P_k(q̄) + Σ_h A_h sin(2πhq/p) + B_h cos(2πhq/p)` (Legendre + ripple of pitch `p`, 2 harmonics) |
+| `saturation` | `u − sat(u)`, `sat` the library's `jaxvs.models.ActuatorSaturation` at `±F_max`: the recorded command beyond the limit is not applied |
 
 Every friction effect is set-valued at rest, as friction is (Karnopp): an axis at rest is
 held by whatever friction force balances the applied force, up to the static level
@@ -28,7 +29,9 @@ when they are added after it. External-force events are only found while the axi
 (at rest static friction carries any force), and each record with events gets its own
 level. Every effect states its physical admissibility
 (`admissible(context)`); the family states when a record identifies the rigid axis
-(`identifiability`) and simulates the effect-free null records of the recorded set-up
+(`identifiability`: motion both ways and a Jacobian of the calibrated parameters of full
+rank; a mass the record does not excite is fixed, at zero or the `mass` option, with a
+warning, instead of refusing the record) and simulates the effect-free null records of the recorded set-up
 (`null_experiments`: the closed loop with the controller identified from the record, or
 the record's motion replayed).
 """
@@ -48,7 +51,7 @@ import scipy.signal as ss
 from jaxtyping import Array, Float
 
 from .. import models
-from ..calibration import fixed, positive, unwrap
+from ..calibration import bounded, fixed, positive, unwrap
 from ..data import Record
 from ._base import (
     AbstractAdditiveEffect,
@@ -78,10 +81,14 @@ def _f(x) -> float:
 
 
 class RigidNominal(eqx.Module):
-    """Nominal rigid axis, `u = M q̈ + Fv q̇ + offset` [N]."""
+    """Nominal rigid axis, `u = M q̈ + Fv q̇ + offset` [N].
 
-    M: Float[Array, ""]
-    Fv: Float[Array, ""]
+    `M` is an array when it is calibrated and a Python float when it is fixed (a record
+    that does not excite the inertia, e.g. a quasi-static friction rig: `DriveFamily`
+    fixes it at zero or at the `mass` option); a float is no calibrated leaf."""
+
+    M: Any  # [kg]: Float[Array, ""] calibrated, float fixed
+    Fv: Any  # [N·s/m]: Float[Array, ""] calibrated, float fixed (bounded at zero)
     offset: Float[Array, ""]
 
     def __call__(self, d: Mapping[str, Array]) -> Array:
@@ -564,6 +571,102 @@ class ExternalForce(AbstractEffect):
         return {}
 
 
+SATURATION_MIN_SHARE = 0.01
+"""Smallest share of the calibration samples whose recorded command lies beyond a
+`saturation` limit (heuristic: a limit reached on fewer samples is a handful of force
+peaks, which any misfit at the largest accelerations can imitate; an amplifier that
+limits the axis does so at every hard acceleration of the record)."""
+
+SATURATION_MAX_SHARE = 0.25
+"""Largest share of the calibration samples beyond a `saturation` limit (heuristic: an
+amplifier at its limit for more than a quarter of the record no longer controls the
+axis; and a limit low in the bulk of the command explains the force by the command
+itself, `u − sat(u)` being most of `u`: a trivial fit that any record admits). The limit
+is calibrated inside `(|u| quantile 1 − SATURATION_MAX_SHARE, 1.05·max |u|)`."""
+
+SATURATION_SMOOTHNESS = 0.01
+"""Corner rounding of the `saturation` clip as a share of the largest recorded command
+(the smooth clip of `jaxvs.models.ActuatorSaturation`: within 0.7 % of the peak of the
+hard clip at the corners, exact on the plateaus)."""
+
+
+class Saturation(AbstractEffect):
+    """The amplifier limits the force: the recorded force `u` is the command, the force
+    applied to the axis is `sat(u)`, the library's `jaxvs.models.ActuatorSaturation` at
+    `±F_max` (Pislaru 2001, §4.3; a drive's current limit). The motion shows the applied
+    force, so the prediction of the recorded command is the predicted applied force plus
+    the part of the command the amplifier does not apply, `u − sat(u)`: the residual is
+    then `sat(u) − ŷ`. Identity once `F_max` is above the largest command.
+
+    Admissible only when the limit is below the largest recorded command and the command
+    lies beyond it on at least `SATURATION_MIN_SHARE` of the calibration samples (the
+    quantiles of `|u|` the limit is compared against are kept with the effect)."""
+
+    name: ClassVar[str] = "saturation"
+    order: ClassVar[int] = 1
+    limit: Any  # F_max [N], positive, calibrated
+    eps: float = eqx.field(static=True)  # corner rounding [N]
+    quantiles: tuple = eqx.field(static=True)  # (shares, |u| levels) of the calibration
+
+    def apply(self, y, d, nominal):
+        law = models.ActuatorSaturation(self.limit, self.eps)
+        return y + law.excess(d["y"])
+
+    def bounds(self) -> tuple[float, float]:
+        """The interval the limit is calibrated in (`SATURATION_MAX_SHARE`)."""
+        shares, levels = (np.asarray(x) for x in self.quantiles)
+        lo = float(np.interp(1.0 - SATURATION_MAX_SHARE, shares, levels))
+        return lo, 1.05 * float(levels[-1])
+
+    def constrained(self):
+        lo, hi = self.bounds()
+        pad = 1e-6 * (hi - lo)
+        return eqx.tree_at(
+            lambda e: e.limit,
+            self,
+            replace_fn=lambda x: bounded(jnp.clip(x, lo + pad, hi - pad), lo, hi),
+        )
+
+    def extra_dof(self, arrays):
+        return 0
+
+    def share_beyond(self, limit: float) -> float:
+        """Share of the calibration samples whose |command| exceeds `limit`."""
+        shares, levels = (np.asarray(x) for x in self.quantiles)
+        if limit >= levels[-1]:
+            return 0.0
+        return float(1.0 - np.interp(limit, levels, shares))
+
+    def admissible(self, context):
+        f = _f(self.limit)
+        umax = float(self.quantiles[1][-1])
+        share = self.share_beyond(f) if np.isfinite(f) else 0.0
+        return check(
+            (np.isfinite(f) and f > 0, f"non-finite or non-positive limit F_max = {f:.4g} N"),
+            (
+                f < umax,
+                f"F_max = {f:.4g} N not below the largest recorded force {umax:.4g} N: the "
+                "limit is never reached",
+            ),
+            (
+                share >= SATURATION_MIN_SHARE,
+                f"the recorded force exceeds F_max = {f:.4g} N on {100 * share:.2g} % of the "
+                f"samples only (at least {100 * SATURATION_MIN_SHARE:g} %: a limit the record "
+                "reaches)",
+            ),
+            (
+                share <= SATURATION_MAX_SHARE,
+                f"the recorded force exceeds F_max = {f:.4g} N on {100 * share:.2g} % of the "
+                f"samples (at most {100 * SATURATION_MAX_SHARE:g} %: an amplifier limited "
+                "most of the time does not control the axis)",
+            ),
+        )
+
+    def parameters(self):
+        f = _f(self.limit)
+        return {"F_max": f, "share_at_limit": self.share_beyond(f)}
+
+
 # ------------------------------------------------------------------------------ templates
 
 
@@ -656,6 +759,17 @@ def _t_position(ctx: Context) -> list[AbstractEffect]:
     top = np.argsort(spec)[::-1][:2]
     pitches = [span / k for k in top if k > 0] + [span / 1.5]
     return [PositionForceEffect(jnp.zeros(7), jnp.asarray(p), centre, half) for p in pitches]
+
+
+def _t_saturation(ctx: Context) -> list[AbstractEffect]:
+    """Limits at the 90 % and 98 % quantiles of the recorded |force|: the calibration
+    moves `F_max` down where the command is beyond the applied force, up otherwise."""
+    y = np.abs(np.concatenate([e.y for e in ctx.experiments]))
+    shares = np.linspace(0.5, 1.0, 201)
+    levels = np.quantile(y, shares)
+    table = (tuple(float(x) for x in shares), tuple(float(x) for x in levels))
+    eps = SATURATION_SMOOTHNESS * float(levels[-1])
+    return [Saturation(jnp.asarray(float(np.quantile(y, p))), eps, table) for p in (0.9, 0.98)]
 
 
 def _t_external(ctx: Context) -> list[AbstractEffect]:
@@ -780,6 +894,79 @@ def _level_cuts(x: np.ndarray, w: int, step: float) -> list[int]:
     return [*_level_cuts(x[:cut], w, step), cut, *(cut + j for j in _level_cuts(x[cut:], w, step))]
 
 
+MASS_RELATIVE_SE = 0.25
+"""Largest relative standard error of a calibrated mass that counts as excited (four
+standard errors from zero; Fisher information with the white noise level of the
+residual). Below it the inertial force the record shows is within a few noise standard
+deviations over the whole record: fixing the mass loses nothing the record can show."""
+
+JACOBIAN_RTOL = 1e-3
+"""Relative singular value of the column-scaled Jacobian of the nominal parameters below
+which a drive record is refused (heuristic: at 1e-3 a parameter combination is a
+thousand times less determined than the best one; the search's recalibrations trade it
+with every effect)."""
+
+
+def mass_not_excited(experiments: Sequence[Experiment]) -> str | None:
+    """`None` when the records determine a positive mass, else why not: no acceleration,
+    a least-squares mass that is not positive, or one not determined to better than
+    `MASS_RELATIVE_SE` (Fisher information with the record's noise, the white part of the
+    residual by robust successive differences: the slow part of the residual is the
+    unmodelled effect the search is there to explain, not a lack of excitation)."""
+    a = np.concatenate([e.arrays["a"] for e in experiments])
+    v = np.concatenate([e.arrays["v"] for e in experiments])
+    y = np.concatenate([e.y for e in experiments])
+    if not np.any(a):
+        return "no acceleration in the record"
+    phi = np.stack([a, v, np.ones_like(a)], -1)
+    th, *_ = np.linalg.lstsq(phi, y, rcond=None)
+    mass = float(th[0])
+    if not mass > 0:
+        return f"the least-squares mass is not positive, M = {mass:.4g} kg"
+    sigma2 = difference_noise_sigma(y - phi @ th) ** 2
+    se_m = float(np.sqrt(max((sigma2 * np.linalg.pinv(phi.T @ phi))[0, 0], 0.0)))
+    if se_m > MASS_RELATIVE_SE * mass:
+        return (
+            f"M = {mass:.4g} ± {se_m:.2g} kg, one standard error with the record's noise, is "
+            f"not determined to {100 * MASS_RELATIVE_SE:g} %"
+        )
+    return None
+
+
+def jacobian_refusal(experiments: Sequence[Experiment], nominal: RigidNominal) -> str | None:
+    """`None` when the calibrated parameters of the rigid axis are identifiable, else the
+    refusal naming the parameter and what to record: the Jacobian of the prediction in
+    the calibrated parameters (`q̈`, `q̇`, `1` for `M`, `Fv`, `offset`; fixed ones left
+    out), column-scaled, must have every relative singular value above `JACOBIAN_RTOL`."""
+    cols = {
+        "M": np.concatenate([e.arrays["a"] for e in experiments]),
+        "Fv": np.concatenate([e.arrays["v"] for e in experiments]),
+        "offset": np.ones(sum(e.n for e in experiments)),
+    }
+    free = [n for n in ("M", "Fv") if not isinstance(getattr(nominal, n), float)] + ["offset"]
+    advice = DriveFamily.record_advice
+    phi = np.stack([cols[n] for n in free], -1)
+    norms = np.linalg.norm(phi, axis=0)
+    for name, norm in zip(free, norms):
+        if norm == 0:
+            return (
+                f"{name} is not identifiable: its regressor is zero in the record; {advice[name]}"
+            )
+    _, sv, vt = np.linalg.svd(phi / norms, full_matrices=False)
+    rel = sv[-1] / sv[0]
+    if rel >= JACOBIAN_RTOL:
+        return None
+    w = vt[-1] / np.max(np.abs(vt[-1]))
+    involved = [n for n, x in zip(free, w) if abs(x) > 0.05]
+    worst = free[int(np.argmax(np.abs(vt[-1])))]
+    combo = " + ".join(f"{x:+.2f}·{n}" for n, x in zip(free, w) if abs(x) > 0.05)
+    return (
+        f"{' and '.join(involved)} cannot be told apart in the record (the combination "
+        f"{combo} has relative singular value {rel:.1e} < {JACOBIAN_RTOL:g}); "
+        f"{worst} is the least determined: {advice[worst]}"
+    )
+
+
 class DriveFamily(AbstractFamily):
     """Rigid prismatic axis driven by a force `u` with measured position `q`.
 
@@ -788,7 +975,9 @@ class DriveFamily(AbstractFamily):
     rate is about 4× the cut-off), `friction_sharpness` (`v_s` of the smooth sign as a
     fraction of the largest speed, 0.005), `zoh_force` (default `True`: the recorded force
     is zero-order held by the drive, i.e. acts on average half a sample after its time
-    stamp; the half-sample shift is compensated so that it is not reported as a delay).
+    stamp; the half-sample shift is compensated so that it is not reported as a delay),
+    `mass` (the moving mass [kg] used when the record does not excite the inertia;
+    default 0).
     """
 
     name = "drive"
@@ -801,8 +990,10 @@ class DriveFamily(AbstractFamily):
         "friction_sharpness",
         "zoh_force",
         "controller_taps",
+        "mass",
     )
     target_label = "force u [N]"
+    nominal_warnings: tuple[str, ...] | list[str] = ()  # set by `nominal`
 
     _MODEL_SIGNALS = ("q", "u", "r", "vir", "q_ref", "qg")
 
@@ -876,67 +1067,32 @@ class DriveFamily(AbstractFamily):
         )
 
     def identifiability(self, experiments: Sequence[Experiment], model: GapModel) -> str | None:
-        """The rigid axis is identified when the motion goes both ways with at least two
-        velocity reversals, the regressors `(q̈, q̇, 1)` are not collinear, and the
-        calibrated mass is positive and determined to better than 25 % (four standard
-        errors from zero; Fisher information with the white noise level of the
-        residual) and the viscous friction is not negative."""
+        """The rigid axis is identified when the motion goes both ways (one reversal
+        suffices: motion in both directions separates friction from the offset) and the
+        Jacobian of the calibrated parameters (`(q̈, q̇, 1)`, without `q̈` when the mass is
+        fixed), column-scaled, has no relative singular value below `JACOBIAN_RTOL`. A
+        mass the record does not excite, or a negative viscous friction, is not a
+        refusal: `nominal` fixes them (with a warning) before the calibration."""
         v = np.concatenate([e.arrays["v"] for e in experiments])
         vm = float(np.max(np.abs(v)))
         if vm == 0 or np.mean(v > 0.05 * vm) < 0.02 or np.mean(v < -0.05 * vm) < 0.02:
             return (
-                "the axis moves in one direction only: inertia, viscous friction and offset "
-                "(and every friction effect) need motion both ways; record a back-and-forth "
-                "motion"
+                "the axis moves in one direction only: viscous friction and the offset (and "
+                "every friction effect) need motion both ways; record a back-and-forth motion"
             )
-        fast = v[np.abs(v) > 0.05 * vm]
-        reversals = int(np.sum(np.diff(np.sign(fast)) != 0))
-        if reversals < 2:
-            return (
-                f"only {reversals} velocity reversal(s): at least 2 are needed to separate "
-                "friction from the offset; record several back-and-forth moves"
-            )
-        phi = np.concatenate(
-            [np.stack([e.arrays["a"], e.arrays["v"], np.ones(e.n)], -1) for e in experiments]
-        )
-        norms = np.linalg.norm(phi, axis=0)
-        if np.any(norms == 0):
-            return "no acceleration in the record: the inertia is not excited"
-        sv = np.linalg.svd(phi / norms, compute_uv=False)
-        if sv[-1] / sv[0] < 1e-3:
-            return (
-                f"acceleration, velocity and a constant are collinear in the record (relative "
-                f"singular value {sv[-1] / sv[0]:.1e}): the inertia and viscous friction cannot "
-                "be told apart; excite the axis with varied accelerations"
-            )
-        nom = unwrap(model.nominal)
-        mass, fv = float(nom.M), float(nom.Fv)
-        y = np.concatenate([e.y for e in experiments])
-        pred = phi @ np.array([mass, fv, float(nom.offset)])
-        e = y - pred
-        # Fisher information with the noise of the record (the white part of the
-        # residual, robust successive differences): the slow part of the residual is the
-        # unmodelled effect the search is there to explain (a position-dependent force
-        # makes it large and strongly correlated), not a lack of excitation
-        sigma2 = difference_noise_sigma(e) ** 2
-        cov = sigma2 * np.linalg.pinv(phi.T @ phi)
-        se_m = float(np.sqrt(max(cov[0, 0], 0.0)))
-        if not mass > 0:
-            return (
-                f"the calibrated mass is not positive (M = {mass:.4g} kg): the record does not "
-                "excite the inertia; record moves with clear accelerations"
-            )
-        if se_m > 0.25 * mass:
-            return (
-                f"the mass is not determined (M = {mass:.4g} ± {se_m:.2g} kg, one standard "
-                "error with the record's noise level): excite the inertia more strongly"
-            )
-        if fv < 0:
-            return (
-                f"the calibrated viscous friction is negative (Fv = {fv:.4g} N·s/m): the record "
-                "does not separate it from the inertia and the offset"
-            )
-        return None
+        return jacobian_refusal(experiments, unwrap(model.nominal))
+
+    singular_rtol: ClassVar[float] = 1e-3
+    """The relative singular value of the column-scaled Jacobian below which `jaxvs check`
+    and the diagnosis refuse a drive record (`JACOBIAN_RTOL`)."""
+
+    record_advice: ClassVar[dict[str, str]] = {
+        "M": "record moves with clear, varied accelerations, or give the moving mass with "
+        "the mass option",
+        "Fv": "record moves at several different speeds",
+        "offset": "record motion in both directions at several speeds",
+    }
+    """What to record so that a parameter becomes identifiable (named in refusals)."""
 
     def admissibility_context(
         self, experiments: Sequence[Experiment], model: GapModel
@@ -989,12 +1145,54 @@ class DriveFamily(AbstractFamily):
         return "rigid axis M q̈ + Fv q̇ + offset = u (inverse dynamics, force predicted from motion)"
 
     def nominal(self, experiments: Sequence[Experiment]) -> RigidNominal:
-        phi = np.concatenate(
-            [np.stack([e.arrays["a"], e.arrays["v"], np.ones(e.n)], -1) for e in experiments]
-        )
+        """The rigid axis by linear least squares. A mass the record does not excite
+        (`mass_not_excited`) is fixed at the `mass` option (default 0 kg) and a negative
+        viscous friction at zero, each with a warning (`nominal_warnings`, reported by
+        `jaxvs check` and in the diagnosis report): a quasi-static friction rig does not
+        excite its inertia by design, and its friction and play are still diagnosed."""
         y = np.concatenate([e.y for e in experiments])
-        th, *_ = np.linalg.lstsq(phi, y, rcond=None)
-        return RigidNominal(jnp.asarray(th[0]), jnp.asarray(th[1]), jnp.asarray(th[2]))
+        a = np.concatenate([e.arrays["a"] for e in experiments])
+        v = np.concatenate([e.arrays["v"] for e in experiments])
+        one = np.ones_like(v)
+        self.nominal_warnings: list[str] = []
+        why = mass_not_excited(experiments)
+        if why is None:
+            th, *_ = np.linalg.lstsq(np.stack([a, v, one], -1), y, rcond=None)
+            mass: Any = jnp.asarray(th[0])
+            fv, off = th[1], th[2]
+        else:
+            mass = self.options.get("mass") or 0.0
+            if isinstance(mass, bool) or not isinstance(mass, int | float) or not mass >= 0:
+                raise ValueError(
+                    f"diagnose(drive): the mass option must be a moving mass >= 0 kg; got "
+                    f"{mass!r}."
+                )
+            mass = float(mass)
+            (fv, off), *_ = np.linalg.lstsq(np.stack([v, one], -1), y - mass * a, rcond=None)
+            source = "the mass option" if self.options.get("mass") else "zero"
+            self.nominal_warnings.append(
+                f"the inertia is not excited ({why}): the mass is fixed at {mass:.4g} kg "
+                f"({source}) and the diagnosis goes on with friction and play; give the "
+                "moving mass with the mass option, or record moves with clear accelerations"
+            )
+        if fv < 0:
+            # a force falling with speed (Stribeck friction) or traded with the inertia:
+            # the viscous friction is bounded at zero, the falling part left to the search
+            ph = np.stack([a, one], -1) if not isinstance(mass, float) else one[:, None]
+            rhs = y if not isinstance(mass, float) else y - mass * a
+            th, *_ = np.linalg.lstsq(ph, rhs, rcond=None)
+            if isinstance(mass, float):
+                off = th[0]
+            else:
+                mass, off = jnp.asarray(th[0]), th[1]
+            self.nominal_warnings.append(
+                f"the least-squares viscous friction is negative (Fv = {fv:.4g} N·s/m): it is "
+                "fixed at 0 N·s/m (a force that falls with speed is left to the friction "
+                "effects)"
+            )
+            fv = 0.0
+            return RigidNominal(mass, 0.0, jnp.asarray(off))
+        return RigidNominal(mass, jnp.asarray(fv), jnp.asarray(off))
 
     def library(self) -> list[EffectSpec]:
         return [
@@ -1061,6 +1259,13 @@ class DriveFamily(AbstractFamily):
                 testable=_needs_travel,
                 signature="position",
                 description="force depending on the position (cogging, gravity, spring)",
+            ),
+            EffectSpec(
+                "saturation",
+                ("q", "u"),
+                _t_saturation,
+                signature="|recorded force|",
+                description="the amplifier limits the applied force to ±F_max",
             ),
         ]
 
@@ -1169,7 +1374,7 @@ def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Recor
     sigma_q = 0.0 if step > 0 else float(np.std(q - qf))
     quantise = _quantiser(step, sigma_q, rng, count)
     sims = None
-    if "r" in rec.names:
+    if "r" in rec.names and mass > 0:  # a fixed zero mass: no loop to simulate, replay
         r = np.asarray(rec["r"], float)
         taps = int(options.get("controller_taps", 16))
         coef, r2, sigma_u = identify_controller(q, u, r, dt, taps)

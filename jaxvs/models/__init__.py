@@ -26,6 +26,7 @@ from .drive import (
     AbstractActuator as AbstractActuator,
     AbstractFriction as AbstractFriction,
     AbstractMechanics as AbstractMechanics,
+    ActuatorSaturation as ActuatorSaturation,
     AsymmetricFriction as AsymmetricFriction,
     BallbarResult as BallbarResult,
     BallScrew as BallScrew,

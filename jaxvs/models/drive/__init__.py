@@ -27,6 +27,7 @@ from ._drive import (
 )
 from ._friction import (
     AbstractFriction as AbstractFriction,
+    ActuatorSaturation as ActuatorSaturation,
     AsymmetricFriction as AsymmetricFriction,
     CoulombFriction as CoulombFriction,
     CoulombViscousFriction as CoulombViscousFriction,

@@ -23,13 +23,15 @@ import abc
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..._misc import as_real
+from ..._misc import as_real, concrete
 from .._base import check_parameters
 
 __all__ = [
     "AbstractFriction",
+    "ActuatorSaturation",
     "AsymmetricFriction",
     "CoulombFriction",
     "CoulombViscousFriction",
@@ -346,6 +348,62 @@ def saturation(u: ArrayLike, limit: ArrayLike) -> Array:
     """
     u = jnp.asarray(u)
     return jnp.clip(u, -limit, limit)
+
+
+class ActuatorSaturation(eqx.Module):
+    r"""Force (current) limit of an amplifier: the force applied to the axis is the command
+    clipped at `±F_max` (Pislaru 2001, §4.3: the saturation of the servo amplifier; the
+    current limit of a digital drive).
+
+    With `smoothness = ε > 0` the corners are rounded by softplus,
+    `u − ε·log(1 + e^{(u − F)/ε}) + ε·log(1 + e^{(−u − F)/ε})`: odd in `u`, within `ε·log 2`
+    of the hard clip at the corners and `ε·e^{−(F − |u|)/ε}` of it inside, differentiable in
+    `u` and in `F_max` everywhere (a Levenberg–Marquardt calibration of the limit sees every
+    sample near it, not only those beyond). `smoothness = 0` is the hard clip.
+
+    **Arguments:**
+
+    - `limit`: `F_max` [N] (or the command's unit), > 0.
+    - `smoothness`: corner rounding `ε` (Python float, >= 0, same unit; default 0).
+    """
+
+    limit: Float[Array, ""]
+    smoothness: float = eqx.field(static=True, default=0.0)
+
+    def __init__(self, limit: ArrayLike, smoothness: float = 0.0):
+        self.limit = as_real(limit, "ActuatorSaturation: limit")
+        try:
+            eps = float(smoothness)
+        except TypeError:
+            raise TypeError(
+                "ActuatorSaturation: smoothness must be a Python float (a fixed modelling "
+                f"choice, not a calibrated parameter); got {type(smoothness).__name__}."
+            ) from None
+        if not eps >= 0:
+            raise ValueError(f"ActuatorSaturation: smoothness must be >= 0; got {smoothness}.")
+        self.smoothness = eps
+
+    def __check_init__(self):
+        check_parameters(self)
+        lim = concrete(self.limit)  # None when traced (inside jit): left to the caller
+        if lim is not None and not np.all(lim > 0):
+            raise ValueError(
+                "ActuatorSaturation: limit must be > 0 (the largest force the amplifier "
+                f"applies); got {lim}."
+            )
+
+    def __call__(self, command: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
+        """The applied force for the `command` (elementwise)."""
+        u = jnp.asarray(command)
+        f = self.limit
+        if self.smoothness == 0:
+            return jnp.clip(u, -f, f)
+        eps = self.smoothness
+        return u - eps * jax.nn.softplus((u - f) / eps) + eps * jax.nn.softplus((-u - f) / eps)
+
+    def excess(self, command: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
+        """The part of the command the amplifier does not apply, `command − self(command)`."""
+        return jnp.asarray(command) - self(command)
 
 
 def quantise(x: ArrayLike, resolution: float) -> Array:
