@@ -76,6 +76,7 @@ from .models import (
     position_to_acceleration as position_to_acceleration,
     position_to_acceleration_frf as position_to_acceleration_frf,
     simulate as simulate,
+    simulate_metrics as simulate_metrics,
     static_gain as static_gain,
     to_control as to_control,
     to_modal as to_modal,

@@ -21,7 +21,11 @@ from ._nonlinear_simulate import (
     solve_sampled as solve_sampled,
     zoh_interval as zoh_interval,
 )
-from ._simulate import simulate as simulate
+from ._simulate import (
+    SimulationMetrics as SimulationMetrics,
+    simulate as simulate,
+    simulate_metrics as simulate_metrics,
+)
 from .drive import (
     AbstractActuator as AbstractActuator,
     AbstractFriction as AbstractFriction,
