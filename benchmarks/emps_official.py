@@ -10,7 +10,8 @@ state at that velocity); score the RMSE of the position after them [mm].
 
 Candidates: `OpenLoopAxis`, the rigid axis `M q̈ = u − F(q̇)` of the description (eq. (3))
 with `jaxvs.models` friction laws — Coulomb + viscous + offset, asymmetric (eq. (12)), Dahl
-(a pre-sliding state), and friction whose level drifts with the power it dissipates
+(a pre-sliding state, `DahlFriction`, left out of the run below: its fits on half the
+record diverged), and friction whose level drifts with the power it dissipates
 (`DriftingFriction`: a temperature-like state driven by the recent work of the axis, so
 that two records with other histories see other friction without any measurement of it)
 — simulated with the measured force held over each sample (Tsit5, 2 steps per sample).
@@ -81,10 +82,6 @@ def _asym():
 STRUCTURES = {
     "Coulomb + viscous + offset": lambda: _axis(CoulombViscousFriction(20.0, 200.0, -3.0)),
     "asymmetric (eq. 12)": lambda: _axis(_asym()),
-    "Dahl + viscous + offset": lambda: _axis(DahlFriction(20.0, 2e4, 200.0, -3.0)),
-    "Coulomb + viscous, drifting with dissipated power, + offset": lambda: _axis(
-        DriftingFriction(CoulombViscousFriction(20.0, 200.0), 0.0, 10.0, -3.0)
-    ),
     "asymmetric, drifting with dissipated power, + offset": lambda: _axis(
         DriftingFriction(_asym(), 0.0, 10.0, -3.0)
     ),
@@ -101,11 +98,12 @@ def _feasible(m):
     return ok
 
 
-def _calibrate(name, u, y, weights, max_steps):
+def _calibrate(name, u, y, weights, max_steps, start=None):
     """Free-run output error over the record from its 20-sample state estimate, the
-    samples with weight 0 held out of the fit (the simulation still runs over them)."""
+    samples with weight 0 held out of the fit (the simulation still runs over them);
+    from the structure's nominal guess or from `start`."""
     fit = fit_multiple_shooting(
-        STRUCTURES[name](),
+        STRUCTURES[name]() if start is None else start,
         u,
         y,
         segment_length=len(u) - N0,
@@ -150,12 +148,13 @@ def select(split: SealedTestSplit, max_steps: int) -> tuple[str, dict]:
     the evidence (held-out RMSE per fold and candidate). Reads only `split.train`."""
     u, y = EMPS.arrays(split.train.train[0])
     first = np.arange(len(u)) < len(u) // 2
-    evidence = {}
+    evidence, fold_models = {}, {}
     for name in STRUCTURES:
         folds = []
         for fit_mask in (first, ~first):
             model, _ = _calibrate(name, u, y, fit_mask.astype(float), max_steps)
             folds.append(_masked_rmse(model, u, y, ~fit_mask))
+            fold_models.setdefault(name, model)
         evidence[name] = {"held_out_rmse_mm": folds, "mean_mm": float(np.mean(folds))}
         print(
             f"selection, {name}: held out (fit 1st half -> 2nd, fit 2nd -> 1st) "
@@ -164,17 +163,18 @@ def select(split: SealedTestSplit, max_steps: int) -> tuple[str, dict]:
             flush=True,
         )
     best = min(evidence, key=lambda k: evidence[k]["mean_mm"])
-    return best, evidence
+    return best, evidence, fold_models
 
 
 def run(split: SealedTestSplit, max_steps: int) -> tuple[list[ModelReport], dict]:
-    best, evidence = select(split, max_steps)
+    best, evidence, fold_models = select(split, max_steps)
     split.select(best, evidence)  # final: the test split opens only now
     u, y = EMPS.arrays(split.train.train[0])
     ones = np.ones(len(u))
     rows = []
     for name in [best] + [n for n in STRUCTURES if n != best]:
-        model, info = _calibrate(name, u, y, ones, max_steps)
+        # the whole training file, warm-started from the first fold's estimate
+        model, info = _calibrate(name, u, y, ones, max_steps, start=fold_models[name])
         score = split.score(model)
         chosen = (
             "selected: lowest held-out free-run RMSE on the training file"
@@ -220,7 +220,7 @@ def main() -> None:
     args = parser.parse_args()
     load0 = os.getloadavg()
     split = SealedTestSplit.load(EMPS, args.data)
-    max_steps = 10 if args.quick else 60
+    max_steps = 10 if args.quick else 30
     rows, selection = run(split, max_steps)
     load1 = os.getloadavg()
     best = selection["selected"]

@@ -17,6 +17,7 @@ from . import (
     signal as signal,
     studies as studies,
 )
+from ._cache import enable_compilation_cache as enable_compilation_cache
 from ._io import (
     FORMAT_VERSION as FORMAT_VERSION,
     IncompatibleFileError as IncompatibleFileError,
