@@ -10,8 +10,8 @@ state at that velocity); score the RMSE of the position after them [mm].
 
 Candidates: `OpenLoopAxis`, the rigid axis `M q̈ = u − F(q̇)` of the description (eq. (3))
 with `jaxvs.models` friction laws — Coulomb + viscous + offset, asymmetric (eq. (12)), Dahl
-(a pre-sliding state, `DahlFriction`, left out of the run below: its fits on half the
-record diverged), and friction whose level drifts with the power it dissipates
+(a pre-sliding state, `DahlFriction`, left out of the run below: in a trial its
+calibration on half the record diverged to NaN), and friction whose level drifts with the power it dissipates
 (`DriftingFriction`: a temperature-like state driven by the recent work of the axis, so
 that two records with other histories see other friction without any measurement of it)
 — simulated with the measured force held over each sample (Tsit5, 2 steps per sample).
@@ -241,8 +241,9 @@ the position after them, free-run simulation from the measured force, no other u
 measured output. Source: {EMPS.source}.
 
 jaxvs models: rigid axis `M q̈ = u − F(q̇)` (`OpenLoopAxis`: `jaxvs.models.RigidAxis` with
-`jaxvs.models` friction laws, among them `DahlFriction` and `DriftingFriction`, whose level
-follows the power it dissipated recently through a first-order lag), force held over each
+`jaxvs.models` friction laws: `CoulombViscousFriction`, `AsymmetricFriction`, and
+`DriftingFriction`, whose level follows the power it dissipated recently through a
+first-order lag), force held over each
 sample, Tsit5 with 2 steps per sample; calibrated by free-run output error
 (Levenberg–Marquardt, at most {max_steps} steps).
 

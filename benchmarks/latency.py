@@ -35,7 +35,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
-ENTRIES = ("calibrate", "fit_rational", "diagnose", "design")
+ENTRIES = ("calibrate", "fit_rational", "design", "diagnose")
 DIAGNOSE_CASE = "drive-coulomb-karnopp"
 
 
@@ -187,25 +187,25 @@ def main(argv=None) -> None:
     import jax
 
     load0 = os.getloadavg()[0]
-    entries = {name: measure(name) for name in args.only}
-    res = {
-        "entries": entries,
-        "machine": {
-            "cpus": os.cpu_count(),
-            "load_start": load0,
-            "load_end": os.getloadavg()[0],
-            "platform": platform.platform(),
-            "jax": jax.__version__,
-        },
-    }
     path = RESULTS / "latency.json"
-    if path.exists() and set(args.only) != set(ENTRIES):  # keep the other entries
-        old = json.loads(path.read_text())
-        res["entries"] = {**old.get("entries", {}), **entries}
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(res, indent=2) + "\n")
-    md = markdown(res)
-    (RESULTS / "latency.md").write_text(md)
+    old = json.loads(path.read_text()).get("entries", {}) if path.exists() else {}
+    entries = {}
+    for name in args.only:  # the files are rewritten after each entry point
+        entries[name] = measure(name)
+        res = {
+            "entries": {**old, **entries},
+            "machine": {
+                "cpus": os.cpu_count(),
+                "load_start": load0,
+                "load_end": os.getloadavg()[0],
+                "platform": platform.platform(),
+                "jax": jax.__version__,
+            },
+        }
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(res, indent=2) + "\n")
+        md = markdown(res)
+        (RESULTS / "latency.md").write_text(md)
     print(md)
 
 
