@@ -148,7 +148,7 @@ def markdown(res: dict) -> str:
         f"{res['machine']['jax']}. No GPU was available for these figures.",
         "",
         "| entry point | workload | first call, cold [s] | first call, warm [s] | second call "
-        "[s] | compile share of the cold call | cache files |",
+        "[s] | share of the cold call not spent running | cache files |",
         "|---|---|---:|---:|---:|---:|---:|",
     ]
     for name, r in res["entries"].items():
