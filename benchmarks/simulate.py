@@ -248,6 +248,73 @@ def bench_case(systems: int, samples: int, dtype, coeffs, model, repeats: int) -
     }
 
 
+def _np_reduce(y: np.ndarray, t: np.ndarray) -> tuple[float, float]:
+    """What a user does with a simulated member: RMS error and correlation vs a target."""
+    e = y - t
+    yc, tc = y - y.mean(), t - t.mean()
+    return float(np.sqrt(np.mean(e * e))), float(
+        np.dot(yc, tc) / np.sqrt(np.dot(yc, yc) * np.dot(tc, tc))
+    )
+
+
+def bench_fused(systems: int, samples: int, coeffs, model, repeats: int) -> dict:
+    """Simulate-and-reduce (per-member RMS error and correlation against a measured target,
+    float64): `jaxvs.simulate_metrics` (fused, never writes the output), `jaxvs.simulate`
+    then the same reduction in the jitted program (materialising), and a Python loop of
+    `lfilter` + numpy reduction; interleaved, median of `repeats`."""
+    rng = np.random.default_rng(2)
+    u_np = rng.normal(size=(systems, samples))
+    t_np = rng.normal(size=(systems, samples))
+    u, t = jnp.asarray(u_np), jnp.asarray(t_np)
+    fused = jax.jit(lambda m, v, w: jaxvs.simulate_metrics(m, v, DT, w))
+
+    def _mat(m, v, w):
+        y = jaxvs.simulate(m, v, DT)
+        e = y - w
+        yc = y - y.mean(-1, keepdims=True)
+        tc = w - w.mean(-1, keepdims=True)
+        corr = jnp.sum(yc * tc, -1) / jnp.sqrt(jnp.sum(yc * yc, -1) * jnp.sum(tc * tc, -1))
+        return jnp.sqrt(jnp.mean(e * e, -1)), corr
+
+    mat = jax.jit(_mat)
+    t0 = time.perf_counter()
+    got = jax.block_until_ready(fused(model, u, t))
+    compile_fused = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    jax.block_until_ready(mat(model, u, t))
+    compile_mat = time.perf_counter() - t0
+
+    def loop():
+        return [_np_reduce(sig.lfilter(b, a, u_np[i]), t_np[i]) for i, (b, a) in enumerate(coeffs)]
+
+    t_f, t_m, t_l = [], [], []
+    for _ in range(repeats):
+        t_f.append(timed(lambda: fused(model, u, t), 1)[0])
+        t_m.append(timed(lambda: mat(model, u, t), 1)[0])
+        t_l.append(timed(loop, 1)[0])
+    ref = np.array(loop())
+    err = float(np.max(np.abs(np.asarray(got.rms_error) - ref[:, 0]) / ref[:, 0]))
+    n = systems * samples
+    med = {k: float(np.median(v)) for k, v in (("f", t_f), ("m", t_m), ("l", t_l))}
+    return {
+        "systems": systems,
+        "samples": samples,
+        "dtype": "float64",
+        "compile_fused_s": compile_fused,
+        "compile_materialising_s": compile_mat,
+        "fused_s": med["f"],
+        "materialising_s": med["m"],
+        "lfilter_numpy_s": med["l"],
+        "fused_Mps": n / med["f"] / 1e6,
+        "materialising_Mps": n / med["m"] / 1e6,
+        "lfilter_numpy_Mps": n / med["l"] / 1e6,
+        "fused_ratio_vs_lfilter_numpy": med["l"] / med["f"],
+        "materialising_ratio_vs_lfilter_numpy": med["l"] / med["m"],
+        "max_rel_diff_rms_error_vs_lfilter": err,
+        "load_average": os.getloadavg()[0],
+    }
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
@@ -258,7 +325,20 @@ def main(argv=None) -> dict:
         action="store_true",
         help="rewrite simulate.md from the existing simulate.json (no timing)",
     )
+    ap.add_argument(
+        "--fused-only",
+        action="store_true",
+        help="time only simulate-and-reduce (keeps the other figures of simulate.json)",
+    )
     args = ap.parse_args(argv)
+    if args.fused_only:
+        out = json.loads((RESULTS / "simulate.json").read_text())
+        out["fused"] = run_fused(args)
+        (RESULTS / "simulate.json").write_text(json.dumps(out, indent=2) + "\n")
+        md = markdown(out)
+        (RESULTS / "simulate.md").write_text(md)
+        print(md)
+        return out
     if args.markdown_only:
         out = json.loads((RESULTS / "simulate.json").read_text())
         (RESULTS / "simulate.md").write_text(markdown(out))
@@ -294,6 +374,7 @@ def main(argv=None) -> dict:
         u = jnp.asarray(np.random.default_rng(1).normal(size=mid))
         variants = run_variants(model, u, 3)
         alloc = allocator_row(*mid)
+    fused = run_fused(args)
     target_case = next(
         (
             c
@@ -318,6 +399,7 @@ def main(argv=None) -> dict:
         "bytes_per_system_sample": {"float64": 16, "float32": 8},
         "cases": cases,
         "float32_vs_float64_max_rel_err": f32_err,
+        "fused": fused,
         "variants_at": list(mid),
         "variants": variants,
         "allocator_row": alloc,
@@ -354,6 +436,23 @@ def main(argv=None) -> dict:
     (RESULTS / "simulate.md").write_text(md)
     print(md)
     return out
+
+
+def run_fused(args) -> list[dict]:
+    sizes = [(256, 10_000)] if args.quick else [(1024, 10_000)]
+    rows = []
+    for systems, samples in sizes:
+        model = family(systems)
+        row = bench_fused(systems, samples, lfilter_coefficients(model), model, args.repeats)
+        print(
+            f"simulate-and-reduce {systems} x {samples}: fused {row['fused_Mps']:.1f} M/s, "
+            f"materialising {row['materialising_Mps']:.1f} M/s, lfilter+numpy "
+            f"{row['lfilter_numpy_Mps']:.1f} M/s; fused/loop "
+            f"{row['fused_ratio_vs_lfilter_numpy']:.2f}x (load {row['load_average']:.1f})",
+            flush=True,
+        )
+        rows.append(row)
+    return rows
 
 
 def markdown(out: dict) -> str:
@@ -413,6 +512,29 @@ def markdown(out: dict) -> str:
                 f"| {h['date']} | {h['load_average']:.1f} | {h['jaxvs_Mps']:.1f} | "
                 f"{h['lfilter_Mps']:.1f} | {h['ratio_vs_lfilter']:.2f} | "
                 f"{h['jax_copy_ratio_vs_lfilter']:.2f} |"
+            )
+    if out.get("fused"):
+        lines += [
+            "",
+            "## Simulate and reduce (float64)",
+            "",
+            "Per-member RMS error and correlation against a measured target: "
+            "`jaxvs.simulate_metrics` (fused: each lane group's output is reduced inside the "
+            "group and never written out), `jaxvs.simulate` followed by the same reduction in "
+            "one jitted program (materialising), and a Python loop of `lfilter` + numpy "
+            "reduction. Median of interleaved runs; compile separate.",
+            "",
+            "| systems | samples | fused [ms] | materialising [ms] | lfilter + numpy [ms] "
+            "| fused / loop | materialising / loop | compile fused [s] | load avg |",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+        for f in out["fused"]:
+            lines.append(
+                f"| {f['systems']} | {f['samples']} | {1e3 * f['fused_s']:.1f} | "
+                f"{1e3 * f['materialising_s']:.1f} | {1e3 * f['lfilter_numpy_s']:.1f} | "
+                f"{f['fused_ratio_vs_lfilter_numpy']:.2f} | "
+                f"{f['materialising_ratio_vs_lfilter_numpy']:.2f} | "
+                f"{f['compile_fused_s']:.2f} | {f['load_average']:.1f} |"
             )
     if out["variants"]:
         s, n = out["variants_at"]

@@ -17,6 +17,7 @@ from . import (
     signal as signal,
     studies as studies,
 )
+from ._cache import enable_compilation_cache as enable_compilation_cache
 from ._io import (
     FORMAT_VERSION as FORMAT_VERSION,
     IncompatibleFileError as IncompatibleFileError,
@@ -76,6 +77,7 @@ from .models import (
     position_to_acceleration as position_to_acceleration,
     position_to_acceleration_frf as position_to_acceleration_frf,
     simulate as simulate,
+    simulate_metrics as simulate_metrics,
     static_gain as static_gain,
     to_control as to_control,
     to_modal as to_modal,

@@ -458,17 +458,9 @@ def _compilation_cache() -> None:
     compilation. `JAXVS_NO_CACHE=1` switches it off, `JAX_COMPILATION_CACHE_DIR` moves it."""
     if os.environ.get("JAXVS_NO_CACHE"):
         return
-    import jax
+    from ._cache import enable_compilation_cache
 
-    path = os.environ.get("JAX_COMPILATION_CACHE_DIR") or os.path.join(
-        os.path.expanduser("~"), ".cache", "jaxvs", "xla"
-    )
-    try:
-        os.makedirs(path, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", path)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-    except (OSError, AttributeError):  # read-only home or an older jax: run without cache
-        pass
+    enable_compilation_cache()
 
 
 def _one_line(err: BaseException) -> str:

@@ -436,3 +436,85 @@ def test_write_report(tmp_path):
     assert f"| hold | 0 | 0.5 | 0.3 | {expected:.2f} | **{expected:.2f}** |" in md
     assert "| net (published) | — | — | — | — | 50.0–60.0 | — | — |" in md
     assert saved["task"]["init_window"] == 20 and saved["published"][0]["source"] == "somewhere"
+
+
+# ----------------------------------------------------------------------------- honest selection
+
+
+def _tiny_data():
+    n = 60
+    t = np.arange(n) * 1e-3
+    train = Record({"u": np.sin(t * 50), "q": 0.1 + 0.01 * t}, dt=1e-3)
+    test = Record({"u": np.cos(t * 50), "q": 0.2 - 0.01 * t}, dt=1e-3)
+    return bm.TaskData((train,), (test,), ("train",), ("test",))
+
+
+def test_sealed_test_split_refuses_the_test_split_before_selection():
+    split = bm.SealedTestSplit(EMPS, _tiny_data())
+    calls = []
+
+    def hold(u, y_init):
+        calls.append(u.shape)
+        return np.zeros((u.shape[0], 1)) + y_init[-1]
+
+    # selection sees the training records only
+    assert split.train.test == () and len(split.train.train) == 1
+    assert split.selected is None
+    with pytest.raises(bm.TestSplitSealedError, match="before a model is selected"):
+        split.score(hold)
+    with pytest.raises(bm.TestSplitSealedError, match="before a model is selected"):
+        split.test  # noqa: B018
+    assert calls == []  # the scorer refused before running the model on anything
+    # scoring on the training records only is allowed
+    score_predictor(EMPS, hold, split.train)
+    split.select("hold", {"held_out": 1.0})
+    assert split.selected == "hold" and split.evidence == {"held_out": 1.0}
+    s = split.score(hold)
+    assert len(s.test) == 1 and len(s.train) == 1
+    # a selection is final
+    with pytest.raises(bm.TestSplitSealedError, match="already selected"):
+        split.select("another")
+    with pytest.raises(TypeError, match="BenchmarkTask"):
+        bm.SealedTestSplit(EMPS, "data")
+
+
+def test_results_mark_the_model_selected_on_training_data():
+    """The committed benchmark result: one selected row, and it is the candidate with the
+    lowest held-out error on the training file (the recorded evidence), not the lowest
+    test error."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "benchmarks/results/emps_official.json"
+    out = json.loads(path.read_text())
+    selected = [m for m in out["models"] if m["selected"]]
+    assert len(selected) == 1 and selected[0]["name"] == out["selected"]
+    evidence = out["selection"]["evidence"]
+    assert min(evidence, key=lambda k: evidence[k]["mean_mm"]) == out["selected"]
+    for m in out["models"]:
+        assert m["chosen"], m["name"]
+
+
+@pytest.mark.slow
+def test_fit_weights_hold_samples_out():
+    """Zero weights take samples out of the fit: a model calibrated on the first half of
+    a record with the second half weighted 0 equals one calibrated on the first half
+    alone (the simulation over the held-out span does not change earlier outputs)."""
+    rng = np.random.default_rng(0)
+    n = 400
+    u = rng.normal(size=(n, 1)) * 30
+    truth = OpenLoopAxis(
+        RigidAxis(90.0, CoulombViscousFriction(15.0, 180.0, -2.0)), sample_time=1e-3
+    )
+    y = np.array(truth(u, np.zeros((20, 1))))
+    y[200:] += 0.05  # the held-out half disagrees with the model
+    start = OpenLoopAxis(
+        RigidAxis(95.0, CoulombViscousFriction(20.0, 200.0, 0.0)), sample_time=1e-3
+    )
+    w = (np.arange(n) < 200).astype(float)
+    kw = dict(init_window=20, output_scale=1e-3, free_states=False, max_steps=30)
+    a = fit_multiple_shooting(start, u, y, segment_length=n - 20, weights=w, **kw)
+    b = fit_multiple_shooting(start, u[:200], y[:200], segment_length=180, **kw)
+    np.testing.assert_allclose(a.model.mechanics.mass, b.model.mechanics.mass, rtol=1e-6)
+    np.testing.assert_allclose(a.model.mechanics.friction.Fv, 180.0, rtol=1e-3)
+    with pytest.raises(ValueError, match="weights must be"):
+        fit_multiple_shooting(start, u, y, segment_length=n - 20, weights=np.zeros(n), **kw)

@@ -462,3 +462,67 @@ def test_block_plan_covers_padding():
         for p in plan:
             m = -(-m // p)
         assert m <= _simulate._LMIN
+
+
+def _numpy_metrics(y, t, start):
+    y, t = np.asarray(y)[..., start:], np.broadcast_to(np.asarray(t), np.shape(y))[..., start:]
+    yc = y - y.mean(-1, keepdims=True)
+    tc = t - t.mean(-1, keepdims=True)
+    return {
+        "mean": y.mean(-1),
+        "rms": np.sqrt(np.mean(y**2, -1)),
+        "std": y.std(-1),
+        "rms_error": np.sqrt(np.mean((y - t) ** 2, -1)),
+        "sse": np.sum((y - t) ** 2, -1),
+        "correlation": np.sum(yc * tc, -1) / np.sqrt(np.sum(yc**2, -1) * np.sum(tc**2, -1)),
+    }
+
+
+@pytest.mark.parametrize("shared", [True, False])
+def test_simulate_metrics_equals_materialised_reduction(monkeypatch, shared):
+    """The fused simulate-and-reduce path against `simulate` followed by a numpy
+    reduction, on random families, in float64: the same engine, so only the order of the
+    sums differs (1e-12 relative). The small group target takes the lax.map path with a
+    tail group (13 lanes: 2 groups of 5 + 3)."""
+    monkeypatch.setattr(_simulate, "_GROUP_SAMPLES", 2**13)
+    rng = np.random.default_rng(11)
+    n_lanes, n = 13, 1200
+    w = 2 * np.pi * np.exp(rng.uniform(np.log(2.0), np.log(150.0), (n_lanes, 3)))
+    z = rng.uniform(0.005, 0.1, (n_lanes, 3))
+    r = rng.normal(size=(n_lanes, 3)) * w**2
+    family = jaxvs.ModalModel(jnp.asarray(w), jnp.asarray(z), jnp.asarray(r))
+    u = rng.normal(size=n) if shared else rng.normal(size=(n_lanes, n))
+    target = rng.normal(size=n) if shared else rng.normal(size=(n_lanes, n)) + 1.0
+    y = np.asarray(jaxvs.simulate(family, u, DT))
+    start = 37 if shared else 0
+    got = jaxvs.simulate_metrics(family, u, DT, target, start=start)
+    ref = _numpy_metrics(y, target, start)
+    assert got.n_samples == n - start
+    for name, value in ref.items():
+        assert _rel(getattr(got, name), value) < 1e-12, name
+    if shared:
+        plain = jaxvs.simulate_metrics(family, u, DT)
+        assert plain.rms_error is None and plain.correlation is None
+        assert _rel(plain.rms, np.sqrt(np.mean(y**2, -1))) < 1e-12
+
+
+def test_simulate_metrics_mimo_and_bad_input():
+    rng = np.random.default_rng(3)
+    ss = jaxvs.StateSpace(
+        -np.eye(2) * 5 + rng.normal(size=(2, 2)) * 0.1,
+        rng.normal(size=(2, 2)),
+        rng.normal(size=(3, 2)),
+        np.zeros((3, 2)),
+    )
+    u = rng.normal(size=(400, 2))
+    t = rng.normal(size=(400, 3))
+    y = np.asarray(jaxvs.simulate(ss, u, DT))
+    got = jaxvs.simulate_metrics(ss, u, DT, t)
+    assert got.rms_error.shape == (3,)
+    assert _rel(got.rms_error, np.sqrt(np.mean((y - t) ** 2, 0))) < 1e-12
+    with pytest.raises(ValueError, match="target has shape"):
+        jaxvs.simulate_metrics(ss, u, DT, t[:, :2])
+    with pytest.raises(ValueError, match="start must be"):
+        jaxvs.simulate_metrics(ss, u, DT, t, start=400)
+    with pytest.raises(ValueError, match="finite"):
+        jaxvs.simulate_metrics(ss, u, DT, np.full((400, 3), np.nan))

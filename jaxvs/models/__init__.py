@@ -21,9 +21,14 @@ from ._nonlinear_simulate import (
     solve_sampled as solve_sampled,
     zoh_interval as zoh_interval,
 )
-from ._simulate import simulate as simulate
+from ._simulate import (
+    SimulationMetrics as SimulationMetrics,
+    simulate as simulate,
+    simulate_metrics as simulate_metrics,
+)
 from .drive import (
     AbstractActuator as AbstractActuator,
+    AbstractDynamicFriction as AbstractDynamicFriction,
     AbstractFriction as AbstractFriction,
     AbstractMechanics as AbstractMechanics,
     ActuatorSaturation as ActuatorSaturation,
@@ -33,13 +38,16 @@ from .drive import (
     CoulombFriction as CoulombFriction,
     CoulombViscousFriction as CoulombViscousFriction,
     CurrentLoop as CurrentLoop,
+    DahlFriction as DahlFriction,
     DCMotor as DCMotor,
+    DriftingFriction as DriftingFriction,
     DriveAxis as DriveAxis,
     DriveResponse as DriveResponse,
     FlexibleAxis as FlexibleAxis,
     ForceGain as ForceGain,
     FrictionSum as FrictionSum,
     GeometricErrors as GeometricErrors,
+    LuGreFriction as LuGreFriction,
     NoFriction as NoFriction,
     PositionLoop as PositionLoop,
     RigidAxis as RigidAxis,

@@ -213,8 +213,15 @@ def _run_group(
     k: int,
     siso_in: bool,
     siso_out: bool,
+    target: Array | None = None,
+    t_lanes: bool = False,
+    start: int = 0,
+    reduce: bool = False,
 ) -> Array:
     """Simulate one group of lanes.
+
+    With `reduce`, the group's output is reduced over time at once (see `_reduce`) and
+    only the per-lane sums leave the group: the full output is never written out.
 
     `u (g?, N)` (single input) or `(g?, N, in)`, `s0 (g, 2, nb)`; returns `y (g, N)` (single
     output) or `(g, N, out)`. Raises (eqx.error_if) when the output is not finite; the input
@@ -247,7 +254,40 @@ def _run_group(
         _bdot(s.reshape(g, q, 2 * nb), tab["O"], True, tab_lanes) + chk
     )
     y = y.reshape(g, q * k) if siso_out else y.reshape(g, q * k, -1)
-    return y[:, :n] if q * k != n else y
+    y = y[:, :n] if q * k != n else y
+    if reduce:
+        return _reduce(y, target, t_lanes, start)
+    return y
+
+
+def _reduce(y: Array, target: Array | None, t_lanes: bool, start: int) -> Array:
+    """Per-lane sums over time (from sample `start`) of one group's output `y (g, N[, out])`:
+    `[Σy, Σy², Σ(y − ȳ)², Σt, Σ(t − t̄)², Σ(y − ȳ)(t − t̄), Σ(y − t)²]` on a last axis of 7
+    (target terms 0 without a target). A lane's whole record lives in its group, so the
+    centred sums are exact two-pass sums and errors are formed before squaring."""
+    y = y[:, start:]
+    n = y.shape[1]
+    ym = jnp.sum(y, 1, keepdims=True) / n
+    dy = y - ym
+    zero = jnp.zeros(y.shape[:1] + y.shape[2:], y.dtype)
+    out = [ym[:, 0] * n, jnp.sum(y * y, 1), jnp.sum(dy * dy, 1)]
+    if target is None:
+        return jnp.stack(out + [zero] * 4, -1)
+    t = target[..., start:, :] if y.ndim == 3 else target[..., start:]
+    t = t if t_lanes else t[None]
+    tm = jnp.sum(t, -2 if y.ndim == 3 else -1, keepdims=True) / n
+    dt_ = t - tm
+    e = y - t
+    return jnp.stack(
+        out
+        + [
+            jnp.broadcast_to(tm[:, 0] * n, zero.shape),
+            jnp.broadcast_to(jnp.sum(dt_ * dt_, 1), zero.shape),
+            jnp.sum(dy * dt_, 1),
+            jnp.sum(e * e, 1),
+        ],
+        -1,
+    )
 
 
 def _group_target(n_lanes: int, n_samples: int, channels: int) -> int:
@@ -264,6 +304,10 @@ def _engine(
     k: int,
     siso_in: bool,
     siso_out: bool,
+    target: Array | None = None,
+    t_lanes: bool = False,
+    start: int = 0,
+    reduce: bool = False,
 ) -> Array:
     """All lanes, in groups of `g` mapped with `jax.lax.map`.
 
@@ -275,25 +319,43 @@ def _engine(
     n = u.shape[-1] if siso_in else u.shape[-2]
     channels = (1 if siso_in else u.shape[-1]) + (tab["T"].shape[-1] // k)
     args = (tab_lanes, u_lanes, k, siso_in, siso_out)
-    target = _group_target(n_lanes, n, channels)
-    g = next(d for d in range(target, 0, -1) if n_lanes % d == 0)
+    red = (t_lanes, start, reduce)
+    per_group = _group_target(n_lanes, n, channels)
+    g = next(d for d in range(per_group, 0, -1) if n_lanes % d == 0)
     if g == n_lanes:
-        return _run_group(tab, u, s0, *args)
-    if 4 * g < target:
-        n_main = (n_lanes // target) * target
-        head = _map_groups(tab, u, s0, target, n_main, *args)
+        return _run_group(tab, u, s0, *args, target, *red)
+    if 4 * g < per_group:
+        n_main = (n_lanes // per_group) * per_group
+        head = _map_groups(tab, u, s0, per_group, n_main, *args, target, *red)
         rest = slice(n_main, n_lanes)
         tail = _run_group(
             jax.tree_util.tree_map(lambda x: x[rest], tab) if tab_lanes else tab,
             u[rest] if u_lanes else u,
             s0[rest],
             *args,
+            None if target is None else (target[rest] if t_lanes else target),
+            *red,
         )
         return jnp.concatenate([head, tail], axis=0)
-    return _map_groups(tab, u, s0, g, n_lanes, *args)
+    return _map_groups(tab, u, s0, g, n_lanes, *args, target, *red)
 
 
-def _map_groups(tab, u, s0, g, n_used, tab_lanes, u_lanes, k, siso_in, siso_out):
+def _map_groups(
+    tab,
+    u,
+    s0,
+    g,
+    n_used,
+    tab_lanes,
+    u_lanes,
+    k,
+    siso_in,
+    siso_out,
+    target=None,
+    t_lanes=False,
+    start=0,
+    reduce=False,
+):
     """`jax.lax.map` over the first `n_used` lanes in groups of `g`."""
     n_groups = n_used // g
 
@@ -306,6 +368,8 @@ def _map_groups(tab, u, s0, g, n_used, tab_lanes, u_lanes, k, siso_in, siso_out)
         xs["tab"] = jax.tree_util.tree_map(split, tab)
     if u_lanes:
         xs["u"] = split(u)
+    if target is not None and t_lanes:
+        xs["target"] = split(target)
 
     def body(x):
         return _run_group(
@@ -317,6 +381,10 @@ def _map_groups(tab, u, s0, g, n_used, tab_lanes, u_lanes, k, siso_in, siso_out)
             k,
             siso_in,
             siso_out,
+            x["target"] if (target is not None and t_lanes) else target,
+            t_lanes,
+            start,
+            reduce,
         )
 
     y = jax.lax.map(body, xs)
@@ -417,7 +485,17 @@ def simulate(
     contains NaN or inf, when a traced `dt` is not positive, or when the response
     overflows (an unstable model or an unstable Euler/Heun step).
     """
-    who = "simulate"
+    u_flat, dt_arr, x0, batch, u_lanes = _checked(model, u, dt, method, x0, "simulate")
+    # The engine parameters are part of the jit cache key (they are module-level
+    # heuristics, read at trace time).
+    config = (_K, _LMIN, _GROUP_SAMPLES)
+    y = _simulate_flat(model, u_flat, dt_arr, x0, method, batch, u_lanes, config)
+    return y.reshape(batch + y.shape[1:])
+
+
+def _checked(model, u, dt, method, x0, who):
+    """Validate the arguments of `simulate` / `simulate_metrics`; return the flattened
+    input, `dt`, `x0`, the batch shape and whether the input has lanes."""
     if not isinstance(model, AbstractLinearModel):
         raise TypeError(f"{who}: expected a jaxvs linear model, got {type(model).__name__}.")
     _check_method(method, who)
@@ -473,15 +551,24 @@ def simulate(
         )
     dt_arr = _check_dt(dt, who)
     u_flat = u.reshape((-1,) + u.shape[-core:]) if u_batch else u
-    # The engine parameters are part of the jit cache key (they are module-level
-    # heuristics, read at trace time).
-    config = (_K, _LMIN, _GROUP_SAMPLES)
-    y = _simulate_flat(model, u_flat, dt_arr, x0, method, batch, bool(u_batch), config)
-    return y.reshape(batch + y.shape[1:])
+    return u_flat, dt_arr, x0, batch, bool(u_batch)
 
 
 @eqx.filter_jit
-def _simulate_flat(model, u, dt, x0, method, batch, u_lanes, config):
+def _simulate_flat(
+    model,
+    u,
+    dt,
+    x0,
+    method,
+    batch,
+    u_lanes,
+    config,
+    reduce=False,
+    target=None,
+    t_lanes=False,
+    start=0,
+):
     """Discretise, build tables and run the engine on flattened lanes (jitted)."""
     # NaN/inf parameters are named as such (not reported as an unstable model), and caught
     # where they reach only the output (a NaN residue leaves the states finite).
@@ -541,8 +628,122 @@ def _simulate_flat(model, u, dt, x0, method, batch, u_lanes, config):
     u0 = (u_l[:, 0, None] if siso_in else u_l[:, 0, :]).astype(rflat.a.dtype)  # (1|L, in)
     xi0 = x_modal - jnp.sum(rflat.b1 * u0[:, None, None, :], axis=-1)
     xi0 = jnp.broadcast_to(jnp.moveaxis(xi0, -1, -2), (n_lanes, 2, nb)).astype(cdt)
-    y = _engine(tab, u, xi0, tab_lanes, u_lanes, k, siso_in, siso_out)
-    return y
+    target = None if target is None else target.astype(cdt)
+    return _engine(
+        tab, u, xi0, tab_lanes, u_lanes, k, siso_in, siso_out, target, t_lanes, start, reduce
+    )
 
 
-__all__ = ["METHODS", "simulate"]
+class SimulationMetrics(eqx.Module):
+    """Per-member summaries of a simulated family, from [`simulate_metrics`][].
+
+    Every field has the family's batch shape (plus the output axis for a multi-output
+    model); the target fields are `None` when no target was given.
+
+    - `n_samples`: number of samples reduced (`time − start`).
+    - `mean`, `rms`, `std`: mean, root mean square and (population) standard deviation of
+      the simulated output.
+    - `rms_error`: `sqrt(mean((y − target)²))`; `sse`: `Σ (y − target)²` (the
+      least-squares cost of an output-error fit, times 2).
+    - `correlation`: Pearson correlation of `y` with the target.
+    """
+
+    n_samples: int = eqx.field(static=True)
+    mean: Array
+    rms: Array
+    std: Array
+    rms_error: Array | None = None
+    sse: Array | None = None
+    correlation: Array | None = None
+
+
+def simulate_metrics(
+    model: AbstractLinearModel,
+    u: ArrayLike,
+    dt: ArrayLike,
+    target: ArrayLike | None = None,
+    *,
+    method: Method = "zoh",
+    x0: ArrayLike | None = None,
+    start: int = 0,
+) -> SimulationMetrics:
+    """Simulate a model or a whole family and reduce each member's output over time at
+    once — RMS, error against a target, correlation, cost — without ever writing the full
+    `(*batch, time)` output.
+
+    Same engine, arguments and checks as [`simulate`][] (the results are those of
+    `simulate` followed by the reduction, up to rounding); the lanes are simulated group by
+    group and each group's output is reduced inside the group, so the memory written is
+    that of one group, not of the family. Use it where a family is simulated only to be
+    scored: model selection over a grid, a population's fitness, a multi-start's costs.
+
+    **Arguments:**
+
+    - `model`, `u`, `dt`, `method`, `x0`: as for [`simulate`][].
+    - `target`: optional measured output, shaped like `simulate`'s result, or without the
+      batch axes (one target shared by every member).
+    - `start`: first sample reduced (skip an initial transient or an initialisation
+      window), `0 <= start < time`.
+
+    **Returns:**
+
+    A [`SimulationMetrics`][] with one value per member (and output).
+
+    **Raises:**
+
+    As [`simulate`][]; `ValueError` when `target` has another shape or is not finite, or
+    `start` is out of range.
+    """
+    who = "simulate_metrics"
+    u_flat, dt_arr, x0, batch, u_lanes = _checked(model, u, dt, method, x0, who)
+    multi = model.n_outputs > 1
+    n_time = u_flat.shape[-2] if model.n_inputs > 1 else u_flat.shape[-1]
+    if not (isinstance(start, (int, np.integer)) and 0 <= start < n_time):
+        raise ValueError(
+            f"{who}: start must be an int in [0, {n_time}) (the first sample reduced); got "
+            f"{start!r}."
+        )
+    core = (n_time, model.n_outputs) if multi else (n_time,)
+    t_lanes = False
+    if target is not None:
+        target = jnp.asarray(target)
+        if target.shape not in (core, batch + core):
+            raise ValueError(
+                f"{who}: target has shape {target.shape}; give {batch + core} (one per member) "
+                f"or {core} (shared by the family), shaped like simulate's output."
+            )
+        target = check_finite(target, f"{who}: target", "Give a finite measured output.")
+        t_lanes = target.shape == batch + core and batch != ()
+        if t_lanes:
+            target = target.reshape((-1,) + core)
+    config = (_K, _LMIN, _GROUP_SAMPLES)
+    sums = _simulate_flat(
+        model,
+        u_flat,
+        dt_arr,
+        x0,
+        method,
+        batch,
+        u_lanes,
+        config,
+        True,
+        target,
+        t_lanes,
+        int(start),
+    )
+    sums = sums.reshape(batch + sums.shape[1:])
+    n = n_time - int(start)
+    s = [sums[..., i] for i in range(7)]
+    out = {
+        "mean": s[0] / n,
+        "rms": jnp.sqrt(s[1] / n),
+        "std": jnp.sqrt(s[2] / n),
+    }
+    if target is not None:
+        out["rms_error"] = jnp.sqrt(s[6] / n)
+        out["sse"] = s[6]
+        out["correlation"] = s[5] / jnp.sqrt(s[2] * s[4])
+    return SimulationMetrics(n, **out)
+
+
+__all__ = ["METHODS", "SimulationMetrics", "simulate", "simulate_metrics"]

@@ -25,6 +25,12 @@ from ._drive import (
     UnstableLoopError as UnstableLoopError,
     VelocityLoop as VelocityLoop,
 )
+from ._dynamic_friction import (
+    AbstractDynamicFriction as AbstractDynamicFriction,
+    DahlFriction as DahlFriction,
+    DriftingFriction as DriftingFriction,
+    LuGreFriction as LuGreFriction,
+)
 from ._friction import (
     AbstractFriction as AbstractFriction,
     ActuatorSaturation as ActuatorSaturation,

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ...data import load_emps
-from ...models import AbstractFriction, RigidAxis, solve_sampled
+from ...models import AbstractDynamicFriction, AbstractFriction, RigidAxis, solve_sampled
 from ._shooting import AbstractSimulator
 from ._task import BenchmarkTask, PublishedResult, Segment
 
@@ -128,7 +128,10 @@ class PositionForce(eqx.Module):
 
 class OpenLoopAxis(AbstractSimulator):
     r"""Open-loop simulator of a rigid axis driven by a measured force:
-    `M q̈ = u − F(q̇) − P(q)`, state `x = (q, q̇)`, output `q`.
+    `M q̈ = u − F(q̇) − P(q)`, state `x = (q, q̇)`, output `q`. A friction law with
+    internal states (`jaxvs.models.AbstractDynamicFriction`: LuGre, Dahl, drifting
+    friction) appends them, `x = (q, q̇, z)`, starting from their steady state at the
+    estimated initial velocity.
 
     The force `u_k` is held over `[t_k, t_{k+1})` (zero-order hold) and the interval is
     integrated by `n_substeps` explicit Runge–Kutta steps (`jaxvs.models.solve_sampled`).
@@ -184,13 +187,19 @@ class OpenLoopAxis(AbstractSimulator):
 
     def _plant(self, t, x, args):
         u, model = args
-        q, v = x[:1], x[1:]
+        q, v = x[:1], x[1:2]
         external = 0.0 if model.position_force is None else -model.position_force(q[0])
+        friction = model.mechanics.friction
+        if isinstance(friction, AbstractDynamicFriction):
+            z = x[2:]
+            force = friction.force(z, v[0])
+            acc = (u + external - force) / model.mechanics.mass
+            return jnp.concatenate([v, acc[None], friction.rates(z, v[0])])
         return jnp.concatenate([v, model.mechanics.acceleration(q, v, u, external)])
 
     def simulate(self, u, x0):
-        """States `(q [m], q̇ [m/s])` at every sample (before `u_k` acts) from `x0` at
-        `k = 0`; `u` is `(time, 1)` or `(time,)` [N]."""
+        """States `(q [m], q̇ [m/s], friction states)` at every sample (before `u_k`
+        acts) from `x0` at `k = 0`; `u` is `(time, 1)` or `(time,)` [N]."""
         u = jnp.asarray(u)
         u = u[:, 0] if u.ndim == 2 else u
         xs, _ = solve_sampled(
@@ -218,11 +227,17 @@ class OpenLoopAxis(AbstractSimulator):
         q = q[:, 0] if q.ndim == 2 else q
         n = q.shape[0]
         if n == 1:
-            return jnp.stack([q[0], jnp.zeros_like(q[0])])
+            return self._with_friction_state(jnp.stack([q[0], jnp.zeros_like(q[0])]))
         tau = (jnp.arange(n) - (n - 1)) * self.sample_time
         basis = jnp.stack([jnp.ones(n), tau] + ([tau**2] if n > 2 else []), axis=1)
         coef = jnp.linalg.lstsq(basis, q)[0]
-        return coef[:2]
+        return self._with_friction_state(coef[:2])
+
+    def _with_friction_state(self, qv):
+        friction = self.mechanics.friction
+        if isinstance(friction, AbstractDynamicFriction):
+            return jnp.concatenate([qv, friction.steady_state(qv[1])])
+        return qv
 
     def n_parameters(self) -> int:
         """Number of floating-point parameters (mass, friction, position force)."""

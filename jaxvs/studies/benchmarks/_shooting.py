@@ -134,6 +134,7 @@ def fit_multiple_shooting(
     max_steps: int = 100,
     rtol: float = 1e-8,
     throw: bool = True,
+    weights: Float[ArrayLike, " time"] | None = None,
 ) -> ShootingResult:
     r"""Calibrate a simulator on one record by multiple-shooting simulation error.
 
@@ -166,6 +167,10 @@ def fit_multiple_shooting(
     - `max_steps`, `rtol`: Levenberg–Marquardt budget and relative tolerance.
     - `throw`: raise `RuntimeError` when the solve ends with NaN (non-convergence within
       `max_steps` is reported in `result`, not raised).
+    - `weights`: optional `(time,)` weights `>= 0` of the output residuals (default 1).
+      A zero weight takes a sample out of the fit while the simulation still runs through
+      it: hold out a span of the record (cross-validation) and let the states evolve
+      over it as they would in a free run.
 
     **Returns:**
 
@@ -204,12 +209,22 @@ def fit_multiple_shooting(
             f"{where}: {n} samples hold no segment of {segment_length} samples after the "
             f"{init_window}-sample window; shorten segment_length."
         )
+    if weights is None:
+        w = jnp.ones(n)
+    else:
+        w = jnp.asarray(weights, dtype=float)
+        if w.shape != (n,) or not bool(jnp.all(w >= 0)) or not bool(jnp.any(w > 0)):
+            raise ValueError(
+                f"{where}: weights must be a ({n},) array of values >= 0, not all 0 (one "
+                f"per sample of y); got shape {w.shape}."
+            )
     L = segment_length
     starts = k0 + L * np.arange(n_seg)
     # inputs u[k_s .. k_s + L] give L + 1 states at k_s .. k_s + L (the last one is the
     # state the next segment starts from)
     u_seg = jnp.stack([u[s : s + L + 1] for s in starts])
     y_seg = jnp.stack([y[s : s + L] for s in starts])
+    w_seg = jnp.stack([w[s : s + L] for s in starts])
     windows = jnp.stack([y[s - k0 : s + 1] for s in starts])
     x_guess = jax.vmap(model.initial_state)(windows)
     n_x = x_guess.shape[1]
@@ -238,24 +253,24 @@ def fit_multiple_shooting(
     def build(th):
         return eqx.combine(unravel(th * th_scale), static)
 
-    def segment(zs, us, ys):
+    def segment(zs, us, ys, ws):
         th, xs = zs[:p], zs[p:] * sx
         states = build(th).simulate(us, xs)
-        fit = (build(th).output(states[:-1]) - ys) / sy
+        fit = (build(th).output(states[:-1]) - ys) / sy * ws[:, None]
         return fit.ravel(), states[-1] / sx
 
     def evaluate(z, args):
-        us, ys, fixed = args
+        us, ys, ws, fixed = args
         th = z[:p]
         xs = z[p:].reshape(n_seg, n_x) if free_states else fixed
         zs = jnp.concatenate([jnp.broadcast_to(th, (n_seg, p)), xs], axis=1)
 
-        def with_jac(zz, uu, yy):
-            out = segment(zz, uu, yy)
-            jac = jax.jacfwd(segment)(zz, uu, yy)
+        def with_jac(zz, uu, yy, ww):
+            out = segment(zz, uu, yy, ww)
+            jac = jax.jacfwd(segment)(zz, uu, yy, ww)
             return out, jac
 
-        (fit, end), (j_fit, j_end) = jax.vmap(with_jac)(zs, us, ys)
+        (fit, end), (j_fit, j_end) = jax.vmap(with_jac)(zs, us, ys, ws)
         eye = jnp.eye(n_seg, dtype=z.dtype)
         m = fit.shape[1]
         # fit rows: global columns, then this segment's state columns (block diagonal)
@@ -292,8 +307,8 @@ def fit_multiple_shooting(
     def feasible_z(z):
         return jnp.asarray(is_ok(build(z[:p])))
 
-    def solve(z0, us, ys, fixed):
-        args = (us, ys, fixed)
+    def solve(z0, us, ys, ws, fixed):
+        args = (us, ys, ws, fixed)
         state = lm_init(evaluate, z0, args, rtol)
         initial = state.cost
         state = jax.lax.while_loop(
@@ -304,10 +319,10 @@ def fit_multiple_shooting(
         return state, initial
 
     start = time.perf_counter()
-    compiled = jax.jit(solve).lower(z0, u_seg, y_seg, xs_fixed).compile()
+    compiled = jax.jit(solve).lower(z0, u_seg, y_seg, w_seg, xs_fixed).compile()
     compile_s = time.perf_counter() - start
     start = time.perf_counter()
-    state, initial = compiled(z0, u_seg, y_seg, xs_fixed)
+    state, initial = compiled(z0, u_seg, y_seg, w_seg, xs_fixed)
     jax.block_until_ready(state)
     run_s = time.perf_counter() - start
     result = lm_result(state)

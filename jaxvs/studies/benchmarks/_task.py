@@ -42,6 +42,8 @@ __all__ = [
     "ModelReport",
     "PublishedResult",
     "Segment",
+    "SealedTestSplit",
+    "TestSplitSealedError",
     "TaskData",
     "TaskScore",
     "markdown_table",
@@ -439,6 +441,102 @@ def score_predictor(task: BenchmarkTask, predictor: Predictor, data: TaskData) -
     )
 
 
+class TestSplitSealedError(RuntimeError):
+    """Raised when a test record is scored (or read) before the model is selected."""
+
+
+class SealedTestSplit:
+    r"""A task's records with the test split sealed until one model is selected.
+
+    The guard of an honest benchmark: everything that chooses (structure, options,
+    hyper-parameters, when to stop) sees only `.train`; `.select(name, evidence)` records
+    the choice and the training-data evidence it rests on, once; only then does
+    `.score(model)` run a model on the test records. Scoring, or reading, the test split
+    earlier raises [`TestSplitSealedError`][], and a second selection is refused, so the
+    reported test figure is the first and only one of the model chosen without it.
+
+    **Arguments:**
+
+    - `task`: the [`BenchmarkTask`][].
+    - `data`: its loaded records ([`BenchmarkTask.load`][]).
+    """
+
+    def __init__(self, task: BenchmarkTask, data: TaskData):
+        if not isinstance(task, BenchmarkTask) or not isinstance(data, TaskData):
+            raise TypeError(
+                "SealedTestSplit(task, data): give a BenchmarkTask and the TaskData that "
+                "task.load(folder) returned."
+            )
+        self.task = task
+        self._data = data
+        self._selected: str | None = None
+        self._evidence: dict[str, Any] = {}
+
+    @classmethod
+    def load(cls, task: BenchmarkTask, folder: str | Path) -> SealedTestSplit:
+        """Load a task's records ([`BenchmarkTask.load`][]) and seal their test split."""
+        return cls(task, task.load(folder))
+
+    @property
+    def train(self) -> TaskData:
+        """The training records only (the test split is empty): all that selection sees."""
+        d = self._data
+        return TaskData(d.train, (), d.labels_train, ())
+
+    @property
+    def selected(self) -> str | None:
+        """The name of the selected model (`None` while the split is sealed)."""
+        return self._selected
+
+    @property
+    def evidence(self) -> dict[str, Any]:
+        """The training-data evidence recorded with the selection."""
+        return dict(self._evidence)
+
+    def select(self, name: str, evidence: Mapping[str, Any] | None = None) -> None:
+        """Record the selected model (once) and unseal the test split.
+
+        **Arguments:**
+
+        - `name`: the selected model, as reported.
+        - `evidence`: the training-data figures the choice rests on (e.g. held-out errors
+          of every candidate), kept for the report.
+
+        **Raises:**
+
+        [`TestSplitSealedError`][] when a model was already selected (a selection is final).
+        """
+        if self._selected is not None:
+            raise TestSplitSealedError(
+                f"{self.task.name}: {self._selected!r} is already selected; a selection is "
+                "final (choosing again after seeing test scores would use the test split)."
+            )
+        if not isinstance(name, str) or not name:
+            raise TypeError("SealedTestSplit.select: name must be a non-empty string.")
+        self._selected = name
+        self._evidence = dict(evidence or {})
+
+    def _check(self, what: str) -> None:
+        if self._selected is None:
+            raise TestSplitSealedError(
+                f"{self.task.name}: {what} before a model is selected; choose on the "
+                "training records (.train) and call .select(name, evidence) first."
+            )
+
+    @property
+    def test(self) -> tuple[Record, ...]:
+        """The test records (only after `.select`)."""
+        self._check("the test records were read")
+        return self._data.test
+
+    def score(self, predictor: Predictor) -> TaskScore:
+        """Score a model on the training and the test records ([`score_predictor`][]);
+        only after a selection. Ablations (the other candidates) are scored the same way
+        once the choice is final."""
+        self._check("a model was scored on the test split")
+        return score_predictor(self.task, predictor, self._data)
+
+
 # ----------------------------------------------------------------------------- reports
 
 
@@ -455,6 +553,10 @@ class ModelReport:
       trained here, e.g. published parameters).
     - `details`: anything else for the JSON (parameter values, solver statistics,
       validation scores).
+    - `chosen`: how the row was chosen (e.g. "selected on training data", "ablation",
+      "reference"); shown as a column when any row has it.
+    - `selected`: whether this row is the benchmark's result (the model selected without
+      the test data).
     """
 
     name: str
@@ -463,6 +565,8 @@ class ModelReport:
     train_s: float | None = None
     compile_s: float | None = None
     details: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    chosen: str | None = None
+    selected: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -502,21 +606,25 @@ def markdown_table(
     """The benchmark table in markdown: one row per model run here, then the published
     results (their columns that were not published are `—`)."""
     u = task.unit
+    how = any(r.chosen for r in rows)
     lines = [
-        f"| model | parameters | train time [s] | compile [s] | train RMSE [{u}] | "
-        f"test RMSE [{u}] | test NRMSE | test rel. error [%] |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        f"| model |{' how chosen |' if how else ''} parameters | train time [s] | compile [s] | "
+        f"train RMSE [{u}] | test RMSE [{u}] | test NRMSE | test rel. error [%] |",
+        f"|---|{'---|' if how else ''}---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
+        name = f"**{r.name}**" if r.selected else r.name
         lines.append(
-            f"| {r.name} | {'—' if r.parameters is None else r.parameters} | "
+            f"| {name} |{f' {r.chosen or chr(8212)} |' if how else ''} "
+            f"{'—' if r.parameters is None else r.parameters} | "
             f"{_fmt(r.train_s, 1)} | {_fmt(r.compile_s, 1)} | "
             f"{_fmt(r.score.mean('rmse', 'train'))} | **{_fmt(r.score.mean('rmse'))}** | "
             f"{_fmt(r.score.mean('nrmse'), 4)} | {_fmt(r.score.mean('relative_error'), 2)} |"
         )
     for p in published:
         lines.append(
-            f"| {p.name} (published) | — | {_range(p.train_s, 0)} | — | — | "
+            f"| {p.name} (published) |{' published |' if how else ''} — | "
+            f"{_range(p.train_s, 0)} | — | — | "
             f"{_range(p.test_rmse, 1)} | — | — |"
         )
     return "\n".join(lines)
@@ -575,6 +683,8 @@ def write_report(
                 "parameters": r.parameters,
                 "train_s": r.train_s,
                 "compile_s": r.compile_s,
+                "selected": r.selected,
+                "chosen": r.chosen,
                 "test_rmse": r.score.mean("rmse"),
                 "train_rmse": r.score.mean("rmse", "train"),
                 "test_nrmse": r.score.mean("nrmse"),
