@@ -32,3 +32,9 @@ from ._windows import (
     hann as hann,
     impact_windows as impact_windows,
 )
+from ._basis import (
+    bspline_basis as bspline_basis,
+    difference_penalty as difference_penalty,
+    quantile_knots as quantile_knots,
+    rbf_basis as rbf_basis,
+)
