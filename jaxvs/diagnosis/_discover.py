@@ -197,6 +197,7 @@ class _Basis:
 
     def __init__(self, cal: Sequence[Experiment], inputs: Mapping[str, str], n_basis: int):
         self.inputs = dict(inputs)
+        self.compiled = None  # the basis on stacked experiments, compiled once
         self.knots: dict[str, np.ndarray] = {}
         self.blocks: dict[str, slice] = {}
         k0 = 0
@@ -266,19 +267,39 @@ def _split(model: GapModel):
 @eqx.filter_jit
 def _fit_flexible(params, static, inputs, y, wfit, phi, pen, masks, max_steps):
     """Model and flexible term calibrated jointly by LM, once per mask (vmapped): the
-    parameters, the prediction on every experiment and the final cost."""
+    parameters, the prediction on every experiment and the final cost.
+
+    The normal equations are formed in blocks: the flexible term's Jacobian is its basis
+    (known), so only the model's parameters take a Jacobian-vector product per step, and
+    the basis Gram matrix is formed once per data set."""
     flat, unravel = ravel_pytree(params)
     p = flat.size
+    phw = phi * wfit[..., None]  # (e, n, K): the weighted flexible Jacobian
+    gram = jnp.einsum("enk,enj->kj", phw, phw) + pen.T @ pen
+
+    def model_pred(tm):
+        return jax.vmap(unwrap(eqx.combine(unravel(tm), static)))(inputs)
 
     def predict(theta, mask):
-        m = unwrap(eqx.combine(unravel(theta[:p]), static))
-        return jax.vmap(m)(inputs) + jnp.einsum("enk,k->en", phi, theta[p:] * mask)
+        return model_pred(theta[:p]) + jnp.einsum("enk,k->en", phi, theta[p:] * mask)
 
-    def resid(theta, mask):
-        r = (predict(theta, mask) - y) * wfit
-        return jnp.concatenate([r.ravel(), pen @ theta[p:]])
+    def evaluate(theta, mask):
+        tm, c = theta[:p], theta[p:]
+        ym, jm = jax.vmap(
+            lambda v: jax.jvp(model_pred, (tm,), (v,)), out_axes=(None, 0)
+        )(jnp.eye(p, dtype=tm.dtype))
+        r = (ym + jnp.einsum("enk,k->en", phi, c * mask) - y) * wfit
+        jm = jm * wfit  # (p, e, n)
+        rp = pen @ c
+        jtj_mm = jnp.einsum("pen,qen->pq", jm, jm)
+        jtj_fm = jnp.einsum("enk,pen->kp", phw, jm) * mask[:, None]
+        jtj_ff = gram * jnp.outer(mask, mask) + pen.T @ pen * (1 - jnp.outer(mask, mask))
+        jtj = jnp.block([[jtj_mm, jtj_fm.T], [jtj_fm, jtj_ff]])
+        jtr = jnp.concatenate(
+            [jnp.einsum("pen,en->p", jm, r), jnp.einsum("enk,en->k", phw, r) * mask + pen.T @ rp]
+        )
+        return 0.5 * (jnp.sum(r * r) + jnp.sum(rp * rp)), jtj, jtr
 
-    evaluate = jacobian_normal_equations(resid)
     theta0 = jnp.concatenate([flat, jnp.zeros(phi.shape[-1], flat.dtype)])
 
     def one(mask):
@@ -322,7 +343,9 @@ def _flexible_step(model, exps, n_cal, basis, scale, masks, pen, max_steps=40):
 def _basis_values(basis, inputs):
     """The flexible basis on stacked experiments `(e, n, K)`, in one compiled call."""
     keys = ("v", "q", "a", "u", "t")
-    return jax.jit(jax.vmap(basis))({k: inputs[k] for k in keys})
+    if basis.compiled is None:
+        basis.compiled = jax.jit(jax.vmap(basis))
+    return basis.compiled({k: inputs[k] for k in keys})
 
 
 def _residuals(exps, pred):
