@@ -100,8 +100,11 @@ class _Gram:
     def solve(self, cols: np.ndarray) -> tuple[float, np.ndarray]:
         if cols.size == 0:
             return self.yy, np.zeros(0)
-        g = self.G[np.ix_(cols, cols)] + 1e-10 * np.eye(cols.size)
-        beta = sla.solve(g, self.b[cols], assume_a="pos")
+        g = self.G[np.ix_(cols, cols)]
+        try:
+            beta = sla.solve(g + 1e-14 * np.eye(cols.size), self.b[cols], assume_a="pos")
+        except (np.linalg.LinAlgError, sla.LinAlgError):
+            beta = np.linalg.lstsq(g, self.b[cols], rcond=1e-12)[0]  # collinear columns
         return max(self.yy - float(self.b[cols] @ beta), 0.0), beta / self.scale[cols]
 
 

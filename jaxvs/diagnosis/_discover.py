@@ -86,10 +86,13 @@ _DRIVE_INPUTS = {
     "velocity": "v",
     "position": "q",
     "acceleration": "a",
-    "force": "u",
     "time": "t",
     "velocity·f(time)": "v*t",
 }
+# The recorded force `u` is the target of the inverse-dynamics model: every unmodelled
+# force is in it, so a flexible term in `u` gains on any gap (not only an input
+# nonlinearity) and cannot say where the gap enters. It is left out of the additive
+# slot; the input nonlinearity `u → g(u)` is its own slot (`"force"` in `_Basis`).
 
 
 @dataclasses.dataclass
@@ -211,7 +214,8 @@ class _Basis:
                 self.knots[label] = np.quantile(np.abs(x), (0.5, 0.7, 0.8, 0.9, 0.95))
                 k = 2 * self.knots[label].size
             else:
-                nb = n_basis if key != "v*t" else max(4, n_basis - 2)
+                # a ripple of many periods over the travel needs many knots in position
+                nb = {"v*t": max(4, n_basis - 2), "q": 3 * n_basis}.get(key, n_basis)
                 self.knots[label] = quantile_knots(x, nb)
                 k = self.knots[label].size - 4
             self.blocks[label] = slice(k0, k0 + k)
@@ -285,9 +289,9 @@ def _fit_flexible(params, static, inputs, y, wfit, phi, pen, masks, max_steps):
 
     def evaluate(theta, mask):
         tm, c = theta[:p], theta[p:]
-        ym, jm = jax.vmap(
-            lambda v: jax.jvp(model_pred, (tm,), (v,)), out_axes=(None, 0)
-        )(jnp.eye(p, dtype=tm.dtype))
+        ym, jm = jax.vmap(lambda v: jax.jvp(model_pred, (tm,), (v,)), out_axes=(None, 0))(
+            jnp.eye(p, dtype=tm.dtype)
+        )
         r = (ym + jnp.einsum("enk,k->en", phi, c * mask) - y) * wfit
         jm = jm * wfit  # (p, e, n)
         rp = pen @ c
