@@ -24,7 +24,7 @@ from jaxvs.calibration import backward_elimination, log_evidence, stability_sele
 from jaxvs.data import Record, split_blocks
 from jaxvs.diagnosis import Discovered, GapModel, discover
 from jaxvs.diagnosis._dictionary import DRIVE_NAMED, Member, _k_vexp, nearest_named
-from jaxvs.diagnosis._discover import _covariance, _fit_formula, _split, _stack
+from jaxvs.diagnosis._discover import _covariance, _fit_formula, _split
 from jaxvs.diagnosis._drive import DriveFamily, RigidNominal
 from jaxvs.signal import bspline_basis, quantile_knots
 
