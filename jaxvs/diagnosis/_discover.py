@@ -646,6 +646,8 @@ def discover(
     # flexible term's shape over its input (for the figure)
     out.shape = _shape(exps, n_cal, basis, thetas[ib], p_model, best, preds[-1])
     if not final_members:
+        for k in ("_keep", "_v", "_step"):
+            out.shape.pop(k)
         out.message = (
             "no formula found: no term of the dictionary is kept in "
             f"{stability:.0%} of the resamples; the flexible term's shape over {best} is "
@@ -819,40 +821,51 @@ def _covariance(jtj, r_w, free, n, residual) -> np.ndarray:
 def _shape(exps, n_cal, basis, theta, p, label, pred0) -> dict[str, Any]:
     """The flexible term of input `label` over its input, on the calibration samples:
     `x`, the term `flexible`, the partial residual `partial` (the residual without the
-    flexible term plus the term)."""
+    flexible term). For the term `v·f(t)` the figure is the viscous coefficient `f(t)`
+    over time (term and residual divided by `v` where the speed is above 30 % of its top)."""
     key = basis.inputs[label]
     c = np.asarray(theta[p:])
-    xs, fl, pr = [], [], []
+    sl = basis.blocks[label]
+    xs, fl, pr, vs = [], [], [], []
     for i, e in enumerate(exps[:n_cal]):
         d = {k: jnp.asarray(e.arrays[k])[None] for k in ("v", "q", "a", "u", "t")}
         phi = np.asarray(_basis_values(basis, d))[0]
-        sl = basis.blocks[label]
-        f = phi[:, sl] @ c[sl]
         xs.append(np.asarray(e.arrays["t" if key == "v*t" else key]))
-        fl.append(f)
+        fl.append(phi[:, sl] @ c[sl])
         pr.append(e.y - pred0[i, : e.n])
-    x, f, r = np.concatenate(xs), np.concatenate(fl), np.concatenate(pr)
+        vs.append(np.asarray(e.arrays["v"]))
+    x, f, r, v = (np.concatenate(z) for z in (xs, fl, pr, vs))
+    per_v = key == "v*t"
+    keep = np.abs(v) > 0.3 * np.max(np.abs(v)) if per_v else np.ones(x.size, bool)
+    if per_v:
+        f, r = f / np.where(keep, v, 1.0), r / np.where(keep, v, 1.0)
+    x, f, r = x[keep], f[keep], r[keep]
     step = max(1, x.size // 3000)
     names = {
         "v": "velocity [m/s]",
         "q": "position [m]",
         "a": "acceleration [m/s²]",
-        "u": "force [N]",
         "t": "time [s]",
-        "v*t": "time [s] (term v·f(t))",
+        "v*t": "time [s]",
     }
     return {
         "label": names[key],
+        "ylabel": "viscous coefficient f(t) [N·s/m]" if per_v else "additional force [N]",
         "input": label,
         "x": x[::step],
         "flexible": f[::step],
         "partial": r[::step],
+        "_keep": keep,
+        "_v": v,
+        "_step": step,
     }
 
 
 def _formula_on(exps, n_cal, pred_f, pred0, shape) -> np.ndarray:
     """The formula's contribution on the samples of the figure (the formula fit minus
-    the baseline fit)."""
+    the fit without it), divided by `v` where the figure shows `f(t)`."""
     d = np.concatenate([pred_f[i, : e.n] - pred0[i, : e.n] for i, e in enumerate(exps[:n_cal])])
-    step = max(1, d.size // 3000)
-    return d[::step]
+    keep, v = shape.pop("_keep"), shape.pop("_v")
+    if shape["ylabel"].startswith("viscous"):
+        d = d / np.where(keep, v, 1.0)
+    return d[keep][:: shape.pop("_step")]
