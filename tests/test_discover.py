@@ -262,3 +262,17 @@ def test_a_term_outside_the_dictionary_gets_its_shape_and_no_formula():
     true = 15.0 * np.exp(-(((shape["x"] - 0.01) / 0.006) ** 2))
     k = np.corrcoef(true, shape["flexible"])[0, 1]
     assert k > 0.95
+
+
+def test_bad_input_is_refused_with_the_fix():
+    model = GapModel(RigidNominal(jnp.asarray(1.0), jnp.asarray(1.0), jnp.asarray(0.0)))
+    with pytest.raises(TypeError, match="GapModel"):
+        discover("model", [object()], [object()])
+    with pytest.raises(ValueError, match="validation experiments are needed"):
+        discover(model, [object()], [])
+    with pytest.raises(ValueError, match="no discovery slot yet"):
+        discover(model, [object()], [object()], family="tmf")
+    with pytest.raises(ValueError, match="DiagnosisReport"):
+        discover(object())
+    with pytest.raises(ValueError, match="n_null"):
+        discover(model, [object()], [object()], n_null=-1)

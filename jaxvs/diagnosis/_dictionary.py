@@ -187,7 +187,7 @@ def _k_clip():
     return Kind(
         "u-clip(u)",
         lambda d, s, xp=jnp: _col(d["u"] - xp.clip(d["u"], -s, s)),
-        lambda c, s, x: c[0] * (x["u"] - _sym().Max(-_num(s), _sym().Min(x["u"], _num(s)))),
+        lambda c, s, x: c[0] * (x["u"] - _sym().Max(-_lim(s), _sym().Min(x["u"], _lim(s)))),
         shape="F",
         unit=" N",
         named="saturation",
@@ -195,7 +195,12 @@ def _k_clip():
     )
 
 
+def _lim(s):
+    return _sym().Float(f"{float(s):.4g}", 4)
+
+
 def _num(s):
+    """A shape parameter rounded to four significant digits."""
     return float(f"{float(s):.4g}")
 
 
