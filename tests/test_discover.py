@@ -172,6 +172,7 @@ def test_formula_coefficient_intervals_cover_the_truth():
             jnp.asarray([30.0]),
             jnp.asarray([math.log(5.0)]),
             jnp.asarray([-jnp.inf]),
+            jnp.asarray([jnp.inf]),
             fns,
             100,
         )

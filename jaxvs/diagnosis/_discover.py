@@ -386,7 +386,7 @@ def _screen(members: list[Member], X: list[np.ndarray], B: np.ndarray, r: np.nda
 
 
 @eqx.filter_jit
-def _fit_formula(params, static, inputs, y, wfit, coefs0, logs0, lo, fns, max_steps):
+def _fit_formula(params, static, inputs, y, wfit, coefs0, logs0, lo, hi, fns, max_steps):
     """Model and formula calibrated jointly by LM; shapes in log. Returns θ, the
     prediction, the Jacobian of the weighted residual and the weighted residual."""
     flat, unravel = ravel_pytree(params)
@@ -409,8 +409,8 @@ def _fit_formula(params, static, inputs, y, wfit, coefs0, logs0, lo, fns, max_st
     def resid(theta, args):
         return ((predict(theta) - y) * wfit).ravel()
 
-    def feasible(theta):  # shapes above their floors (a force limit above the median |u|)
-        return jnp.all(theta[p + k :] >= lo)
+    def feasible(theta):  # shapes inside their bounds (a force limit above the median |u|)
+        return jnp.all((theta[p + k :] > lo) & (theta[p + k :] < hi))
 
     evaluate = jacobian_normal_equations(resid)
     theta0 = jnp.concatenate([flat, coefs0, logs0])
@@ -480,7 +480,11 @@ def discover(
                 "GapModel with its calibration and validation experiments."
             )
         model, calibration, validation = rep.final_model, rep.calibration, rep.validation
-        family = rep.family
+        if isinstance(family, str):
+            # the report's family with its options: the null records go through the same
+            # preprocessing as the records
+            options = dict(rep.content.get("data", {}).get("options", {}))
+            family = FAMILIES[rep.family](**options)
     else:
         model = report_or_model
         if not isinstance(model, GapModel):
@@ -591,6 +595,13 @@ def discover(
         for k in ("v", "q", "a", "u", "t")
     }
     members = drive_force_dictionary(cal_d)
+    # each shape stays within a factor 3 of its grid (a shape that runs away turns its
+    # term into another kind: a Stribeck speed at infinity is a sign law)
+    bounds: dict[str, tuple[float, float]] = {}
+    for m in members:
+        if m.shape is not None:
+            lo_, hi_ = bounds.get(m.kind.name, (np.inf, -np.inf))
+            bounds[m.kind.name] = (min(lo_, m.shape), max(hi_, m.shape))
     if best != "force":
         # the recorded force is the target: a term in it enters the formula only when
         # the flexible term says the gap lives there (else it stands in for any term
@@ -673,9 +684,15 @@ def discover(
     logs0 = np.log([m.shape if m.shape is not None else 1.0 for m in fm])
     say("discovery: recalibrating the formula")
     med_u = float(np.median(np.abs(cal_d["u"])))
-    lo = np.array([np.log(med_u) if m.kind.shape == "F" else -np.inf for m in fm])
-    logs0 = np.maximum(logs0, lo + 1e-9)
-    fit = _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo)
+    lo = np.array(
+        [np.log(bounds[m.kind.name][0] / 3) if m.shape is not None else -np.inf for m in fm]
+    )
+    hi = np.array(
+        [np.log(bounds[m.kind.name][1] * 3) if m.shape is not None else np.inf for m in fm]
+    )
+    lo = np.where([m.kind.shape == "F" for m in fm], np.log(med_u), lo)  # a limit, not u
+    logs0 = np.clip(logs0, lo + 1e-9, hi - 1e-9)
+    fit = _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi)
     theta, pred_f, jtj, r_w = fit
     p = p_model
     k = int(sum(m.kind.k for m in fm))
@@ -783,7 +800,7 @@ def _base_jacobian(model, flat, cal) -> np.ndarray:
     return np.concatenate([np.asarray(jac(jnp.asarray(flat), e.jax_arrays())) for e in cal])
 
 
-def _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo):
+def _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi):
     _, unravel, static = _split(model)
     st = _stack(exps, sorted(exps[0].arrays))
     w = np.zeros((len(exps), st["y"].shape[1]))
@@ -799,6 +816,7 @@ def _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo):
         jnp.asarray(c0, float),
         jnp.asarray(logs0, float),
         jnp.asarray(lo, float),
+        jnp.asarray(hi, float),
         fns,
         100,
     )
