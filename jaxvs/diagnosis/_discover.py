@@ -671,16 +671,11 @@ def discover(
     c0 = np.concatenate(
         [full.coefficients.get(j, np.zeros(members[j].kind.k)) for j in final_members]
     )
-    if not np.all(np.isfinite(c0)) or not any(j in full.support for j in final_members):
-        sub = backward_elimination(
-            np.concatenate([X[j] for j in final_members], 1)[rows],
-            rs,
-            _groups_of(fm),
-            base=Bs,
-            n_eff=1e12,
-            g=1e-12,
-        )
-        c0 = np.concatenate([sub.coefficients.get(i, np.zeros(m.kind.k)) for i, m in enumerate(fm)])
+    if not np.all(np.isfinite(c0)) or not all(j in full.support for j in final_members):
+        # a kept kind the full-data elimination dropped: start from least squares of the
+        # kept terms with the model's Jacobian beside them
+        A = np.concatenate([Bs] + [X[j][rows] for j in final_members], 1)
+        c0 = np.linalg.lstsq(A, rs, rcond=None)[0][Bs.shape[1] :]
     logs0 = np.log([m.shape if m.shape is not None else 1.0 for m in fm])
     say("discovery: recalibrating the formula")
     med_u = float(np.median(np.abs(cal_d["u"])))
@@ -778,14 +773,6 @@ def _symbols():
     import sympy as sp
 
     return {n: sp.Symbol(n, real=True) for n in ("v", "q", "a", "u", "t")}
-
-
-def _groups_of(members):
-    out, k0 = [], 0
-    for m in members:
-        out.append(list(range(k0, k0 + m.kind.k)))
-        k0 += m.kind.k
-    return out
 
 
 def _base_jacobian(model, flat, cal) -> np.ndarray:
