@@ -9,6 +9,12 @@ from ._calibrate import (
     calibrate as calibrate,
     free_spec as free_spec,
 )
+from ._evidence import (
+    EvidenceSelection as EvidenceSelection,
+    backward_elimination as backward_elimination,
+    log_evidence as log_evidence,
+    stability_selection as stability_selection,
+)
 from ._family import (
     MultistartResult as MultistartResult,
     calibrate_family as calibrate_family,

@@ -1,5 +1,11 @@
 """Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows."""
 
+from ._basis import (
+    bspline_basis as bspline_basis,
+    difference_penalty as difference_penalty,
+    quantile_knots as quantile_knots,
+    rbf_basis as rbf_basis,
+)
 from ._cwt import (
     CWTDamping as CWTDamping,
     cwt_damping as cwt_damping,

@@ -1,0 +1,258 @@
+"""Typed dictionaries of physically motivated terms for the slots of discovery.
+
+A slot is a physical place where a missing term enters a family's model; its dictionary
+lists the term *kinds* that physics suggests there. A kind is a formula in the slot's
+inputs with at most one shape parameter (a velocity scale, a pitch, a time constant, a
+force limit); the shape is searched on a grid (the grid members are the dictionary's
+columns), and the members kept by the selection are recalibrated with their shape free.
+Each kind knows its SymPy form and the named library effect it belongs to, if any.
+
+Drive, slot `force` (an additional force on the axis; inputs: velocity `v`, position
+`q`, acceleration `a`, the recorded force `u`, time `t`):
+
+| kind | columns | shape | named effect |
+|---|---|---|---|
+| `sign(v)` | `sign(v)` | – | `coulomb_friction` |
+| `tanh(v/v0)` | `tanh(v/v₀)` | `v₀` | `coulomb_friction` |
+| `stribeck` | `exp(−(v/v_s)²)·sign(v)` | `v_s` | `stribeck_friction` |
+| `|v|` | `|v|` | – | `asymmetric_friction` |
+| `v|v|`, `v^3`, `sqrt|v|·sign(v)` | speed powers | – | – |
+| `ripple` | `sin(2πq/p)`, `cos(2πq/p)` | `p` | `position_dependence` |
+| `v·exp(-t/tau)` | `v·exp(−t/τ)` | `τ` | – |
+| `t`, `t^2` | `t`, `t²` | – | – |
+| `u-clip(u)` | `u − clip(u, ±F)` | `F` | `saturation` |
+
+`u − clip(u, ±F)` is the saturation of the inverse-dynamics model: the axis receives
+`clip(u, ±F)`, so the recorded force exceeds what the rigid axis needs by that amount.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = ["DRIVE_NAMED", "Kind", "Member", "drive_force_dictionary"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Kind:
+    """A kind of term: `columns(d, shape, xp) -> (n, k)` with the array module `xp`
+    (`jax.numpy` by default, `numpy` for the selection; `d` maps the slot's input names
+    to arrays), `sympy(coefs, shape, symbols) -> expression`, the shape's name and
+    unit (or `None`), the named effect it belongs to, and a label."""
+
+    name: str
+    columns: Callable[[Mapping[str, jnp.ndarray], jnp.ndarray], jnp.ndarray]
+    sympy: Callable
+    k: int = 1
+    shape: str | None = None
+    unit: str = ""
+    named: str | None = None
+    inputs: tuple[str, ...] = ("v",)
+
+
+@dataclasses.dataclass(frozen=True)
+class Member:
+    """One column group of a dictionary: a kind at one grid value of its shape."""
+
+    kind: Kind
+    shape: float | None = None
+
+    @property
+    def label(self) -> str:
+        if self.kind.shape is None:
+            return self.kind.name
+        return f"{self.kind.name} [{self.kind.shape}={self.shape:.4g}{self.kind.unit}]"
+
+    def evaluate(self, d: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The member's columns on NumPy arrays `(n, k)`."""
+        shape = 1.0 if self.shape is None else float(self.shape)
+        d = {k: np.asarray(v) for k, v in d.items()}
+        return np.asarray(self.kind.columns(d, shape, np)).reshape(-1, self.kind.k)
+
+
+def _col(x):
+    return x[:, None]
+
+
+def _sym():
+    import sympy as sp
+
+    return sp
+
+
+def _k_sign():
+    return Kind(
+        "sign(v)",
+        lambda d, s, xp=jnp: _col(xp.sign(d["v"])),
+        lambda c, s, x: c[0] * _sym().sign(x["v"]),
+        named="coulomb_friction",
+    )
+
+
+def _k_tanh():
+    return Kind(
+        "tanh(v/v0)",
+        lambda d, s, xp=jnp: _col(xp.tanh(d["v"] / s)),
+        lambda c, s, x: c[0] * _sym().tanh(x["v"] / _num(s)),
+        shape="v0",
+        unit=" m/s",
+        named="coulomb_friction",
+    )
+
+
+def _k_stribeck():
+    return Kind(
+        "stribeck",
+        lambda d, s, xp=jnp: _col(xp.exp(-xp.square(d["v"] / s)) * xp.sign(d["v"])),
+        lambda c, s, x: c[0] * _sym().exp(-((x["v"] / _num(s)) ** 2)) * _sym().sign(x["v"]),
+        shape="v_s",
+        unit=" m/s",
+        named="stribeck_friction",
+    )
+
+
+def _k_absv():
+    return Kind(
+        "|v|",
+        lambda d, s, xp=jnp: _col(xp.abs(d["v"])),
+        lambda c, s, x: c[0] * _sym().Abs(x["v"]),
+        named="asymmetric_friction",
+    )
+
+
+def _k_vabsv():
+    return Kind(
+        "v|v|",
+        lambda d, s, xp=jnp: _col(d["v"] * xp.abs(d["v"])),
+        lambda c, s, x: c[0] * x["v"] * _sym().Abs(x["v"]),
+    )
+
+
+def _k_v3():
+    return Kind("v^3", lambda d, s, xp=jnp: _col(d["v"] ** 3), lambda c, s, x: c[0] * x["v"] ** 3)
+
+
+def _k_sqrtv():
+    return Kind(
+        "sqrt|v|·sign(v)",
+        lambda d, s, xp=jnp: _col(xp.sqrt(xp.abs(d["v"])) * xp.sign(d["v"])),
+        lambda c, s, x: c[0] * _sym().sqrt(_sym().Abs(x["v"])) * _sym().sign(x["v"]),
+    )
+
+
+def _k_ripple():
+    def cols(d, p, xp=jnp):
+        ph = 2 * np.pi * d["q"] / p
+        return xp.stack([xp.sin(ph), xp.cos(ph)], -1)
+
+    def sym(c, p, x):
+        sp = _sym()
+        ph = 2 * sp.pi * x["q"] / _num(p)
+        return c[0] * sp.sin(ph) + c[1] * sp.cos(ph)
+
+    return Kind("ripple", cols, sym, k=2, shape="p", unit=" m", named="position_dependence")
+
+
+def _k_vexp():
+    return Kind(
+        "v·exp(-t/tau)",
+        lambda d, s, xp=jnp: _col(d["v"] * xp.exp(-d["t"] / s)),
+        lambda c, s, x: c[0] * x["v"] * _sym().exp(-x["t"] / _num(s)),
+        shape="tau",
+        unit=" s",
+        inputs=("v", "t"),
+    )
+
+
+def _k_t():
+    return Kind(
+        "t", lambda d, s, xp=jnp: _col(d["t"]), lambda c, s, x: c[0] * x["t"], inputs=("t",)
+    )
+
+
+def _k_t2():
+    return Kind(
+        "t^2",
+        lambda d, s, xp=jnp: _col(d["t"] ** 2),
+        lambda c, s, x: c[0] * x["t"] ** 2,
+        inputs=("t",),
+    )
+
+
+def _k_clip():
+    return Kind(
+        "u-clip(u)",
+        lambda d, s, xp=jnp: _col(d["u"] - xp.clip(d["u"], -s, s)),
+        lambda c, s, x: c[0] * (x["u"] - _sym().Max(-_lim(s), _sym().Min(x["u"], _lim(s)))),
+        shape="F",
+        unit=" N",
+        named="saturation",
+        inputs=("u",),
+    )
+
+
+def _lim(s):
+    return _sym().Float(f"{float(s):.4g}", 4)
+
+
+def _num(s):
+    """A shape parameter rounded to four significant digits."""
+    return float(f"{float(s):.4g}")
+
+
+DRIVE_NAMED: dict[str, frozenset[str]] = {
+    "coulomb_friction": frozenset({"sign(v)", "tanh(v/v0)"}),
+    "asymmetric_friction": frozenset({"sign(v)", "tanh(v/v0)", "|v|"}),
+    "stribeck_friction": frozenset({"sign(v)", "tanh(v/v0)", "stribeck"}),
+    "position_dependence": frozenset({"ripple"}),
+    "saturation": frozenset({"u-clip(u)"}),
+}
+"""The kinds each named drive effect is made of (its support in the dictionary)."""
+
+
+def drive_force_dictionary(d: Mapping[str, np.ndarray]) -> list[Member]:
+    """The drive's force-slot dictionary with grids drawn from the calibration data `d`
+    (concatenated arrays `v`, `q`, `t`, `u`): velocity scales as fractions of the top
+    speed, pitches from 1/60 of the travel to twice the travel in steps of a quarter of
+    a cycle over the travel, time constants as fractions of the record's length, force
+    limits at high quantiles of `|u|`."""
+    vmax = float(np.max(np.abs(d["v"])))
+    span = float(np.ptp(d["q"]))
+    tmax = float(np.max(d["t"]))
+    absu = np.abs(np.asarray(d["u"]))
+    out = [Member(_k_sign())]
+    out += [Member(_k_tanh(), vmax * f) for f in (0.005, 0.01, 0.02, 0.05, 0.1)]
+    out += [Member(_k_stribeck(), vmax * f) for f in (0.02, 0.05, 0.1, 0.2, 0.3)]
+    out += [Member(_k_absv()), Member(_k_vabsv()), Member(_k_v3()), Member(_k_sqrtv())]
+    cycles = np.arange(0.5, 60.01, 0.25)
+    out += [Member(_k_ripple(), span / c) for c in cycles]
+    out += [
+        Member(_k_vexp(), tmax * f)
+        for f in (0.05, 0.1, 0.15, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
+    ]
+    out += [Member(_k_t()), Member(_k_t2())]
+    out += [
+        Member(_k_clip(), float(np.quantile(absu, q)))
+        for q in (0.6, 0.7, 0.8, 0.85, 0.9, 0.95, 0.98)
+    ]
+    return out
+
+
+def nearest_named(
+    kinds: Sequence[str], named: Mapping[str, frozenset[str]]
+) -> tuple[str | None, bool]:
+    """The named effect nearest to a support of kinds: `(name, True)` when the support
+    lies inside one named effect's kinds (the smallest such effect), else the named
+    effect sharing most kinds `(name, False)`, or `(None, False)`."""
+    s = set(kinds)
+    if not s:
+        return None, False
+    inside = [(len(k), n) for n, k in named.items() if s <= k]
+    if inside:
+        return min(inside)[1], True
+    share = [(len(s & k), -len(k), n) for n, k in named.items() if s & k]
+    return (max(share)[2], False) if share else (None, False)

@@ -1,0 +1,876 @@
+r"""Discovery of an effect the library does not have: a flexible term in a physical slot,
+then its formula.
+
+After the named search, a gap that no library effect explains may still be above the
+floor. Discovery asks *where* it enters the model and *what* it is:
+
+1. **A flexible term in a slot.** The drive's slot is an additional force on the axis,
+   `u = model(q, q̇, q̈) + f(q̇, q, q̈, u, t)`. `f` is additive over the slot inputs,
+   `Σ_i f_i(x_i)`, plus a viscous coefficient that varies in time, `q̇·f_t(t)`; every
+   `f_i` is a cubic B-spline on knots at quantiles of its input
+   (`jaxvs.signal.bspline_basis`), with a P-spline roughness penalty and a small ridge.
+   The term is linear in its coefficients and is calibrated **jointly** with the
+   model's parameters by the one Levenberg–Marquardt kernel (`jaxvs.calibration.lm_step`),
+   once per input alone and once with all inputs, all fits in one vectorised call. Each
+   fit is scored on the held-out experiments (the held-out nrmse reduction with a
+   moving-block bootstrap interval, `gap_change_interval`). The input whose term alone
+   removes most of the held-out gap is the one that carries it.
+2. **The null pays for the selection.** The same step (every input, then the best) runs
+   on effect-free records simulated from the calibrated nominal model through the
+   recorded set-up (`family.null_experiments`); the flexible term *fires* only when its
+   held-out reduction exceeds the 95th percentile of the null's best reductions, its
+   bootstrap interval excludes zero and it removes at least `min_shrink` of the gap.
+3. **A formula.** A typed dictionary of physically motivated terms for the slot
+   (`_dictionary`), each shape (a velocity scale, a pitch, a time constant, a force
+   limit) on a grid (the two best grid members of each kind are kept by a screening on
+   their single-term fit), is reduced by **backward elimination on the Bayesian evidence
+   of the linear-Gaussian model with Zellner's g-prior** (`g = N_eff`, the
+   unit-information prior; `jaxvs.calibration.backward_elimination`), the model's own
+   Jacobian profiled out and `N_eff = N/τ` from the flexible term's residual. The
+   elimination is repeated on moving-block bootstrap resamples: a kind is kept when it
+   survives in at least 80 % of them (stability selection). The kept terms are then
+   recalibrated with their shapes free, jointly with the model, by the same LM kernel;
+   their coefficients get intervals from the Gauss–Newton covariance inflated by the
+   residual's integrated autocorrelation time.
+4. **Acceptance.** The formula is *found* when it is not empty, its held-out reduction
+   has an interval excluding zero, exceeds the null's threshold and reaches at least
+   `min_share` (0.8) of what the flexible term removes. When its support lies inside a
+   named library effect (only `sign(v)`: Coulomb friction), that named effect is
+   reported instead. Otherwise "no formula found", and the flexible term's shape is
+   the answer ([`plot_discovered`][jaxvs.plotting.plot_discovered] draws it).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+from ..calibration import (
+    backward_elimination,
+    free_spec,
+    jacobian_normal_equations,
+    lm_init,
+    lm_running,
+    lm_step,
+    stability_selection,
+    unwrap,
+)
+from ..signal import bspline_basis, difference_penalty, quantile_knots
+from ._base import Experiment, GapModel
+from ._dictionary import DRIVE_NAMED, Member, drive_force_dictionary, nearest_named
+from ._stats import (
+    block_bootstrap_indices,
+    block_length,
+    effective_samples,
+    gap_change_interval,
+    integrated_time,
+    nrmse,
+)
+
+__all__ = ["Discovered", "discover"]
+
+SLOT_FORCE = "additional force on the axis"
+
+# slot inputs of the drive's force slot: label -> array key (the product `v·f(t)` is the
+# viscous coefficient varying in time)
+_DRIVE_INPUTS = {
+    "velocity": "v",
+    "position": "q",
+    "acceleration": "a",
+    "time": "t",
+    "velocity·f(time)": "v*t",
+}
+# The recorded force `u` is the target of the inverse-dynamics model: every unmodelled
+# force is in it, so a flexible term in `u` gains on any gap (not only an input
+# nonlinearity) and cannot say where the gap enters. It is left out of the additive
+# slot; the input nonlinearity `u → g(u)` is its own slot (`"force"` in `_Basis`).
+
+
+@dataclasses.dataclass
+class Discovered:
+    """What discovery found in one slot (see the module doc for the method).
+
+    - `slot`: the physical place (`"additional force on the axis"`).
+    - `fired`: whether the flexible term beat the null (nothing else is meaningful when not).
+    - `input`: the slot input whose flexible term alone removes most of the held-out gap.
+    - `inputs`: per input (and `"all"`), the flexible term's held-out `reduction`,
+        `shrink` and `shrink_interval`.
+    - `flexible`: the best flexible term's `reduction`, `reduction_interval`, `shrink`,
+        `shrink_interval`, and the null's `null_threshold` and `null_reductions`.
+    - `formula`: the formula as text (SymPy's printing), or `None`; `expression`: the
+        SymPy expression.
+    - `found`: whether the formula was accepted; `message`: the verdict in words
+        (`"no formula found"` when not).
+    - `terms`: per kept term, `kind`, `coefficients`, `intervals`, `shape` (name, value,
+        interval) and `frequency` (stability selection).
+    - `frequencies`: selection frequency of every kind of the dictionary.
+    - `shrink`, `shrink_interval`, `reduction`, `reduction_interval`: the formula's
+        held-out figures; `share`: its reduction over the flexible term's.
+    - `nearest_effect`: the named library effect nearest to the formula;
+        `named_instead`: the formula's support lies inside it, so it is reported instead.
+    - `evidence`: the evidence used for the selection, in words.
+    - `shape`: arrays for the figure (`x`, `partial`, `flexible`, `formula`, `label`).
+    - `seconds`: wall time of the discovery.
+    """
+
+    slot: str
+    fired: bool
+    input: str | None
+    inputs: dict[str, dict[str, Any]]
+    flexible: dict[str, Any]
+    formula: str | None = None
+    found: bool = False
+    message: str = ""
+    terms: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    frequencies: dict[str, float] = dataclasses.field(default_factory=dict)
+    shrink: float | None = None
+    shrink_interval: tuple[float, float] | None = None
+    reduction: float | None = None
+    reduction_interval: tuple[float, float] | None = None
+    share: float | None = None
+    nearest_effect: str | None = None
+    named_instead: bool = False
+    evidence: str = ""
+    shape: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
+    seconds: float = 0.0
+    expression: Any = dataclasses.field(default=None, repr=False)
+
+    def to_json(self) -> dict[str, Any]:
+        """The content of `report.json["discovered"]` (no arrays)."""
+        out = {
+            f.name: getattr(self, f.name)
+            for f in dataclasses.fields(self)
+            if f.name not in ("shape", "expression")
+        }
+        for k in ("shrink_interval", "reduction_interval"):
+            if out[k] is not None:
+                out[k] = [float(x) for x in out[k]]
+        return out
+
+    def __repr__(self) -> str:
+        if not self.fired:
+            return f"Discovered(slot={self.slot!r}: {self.message})"
+        return (
+            f"Discovered(slot={self.slot!r}, input={self.input!r}, formula={self.formula!r}, "
+            f"found={self.found}, shrink={self.shrink}, share={self.share}, "
+            f"nearest_effect={self.nearest_effect!r}: {self.message})"
+        )
+
+
+# ------------------------------------------------------------------------------ data
+
+
+def _slot_experiment(e: Experiment) -> Experiment:
+    """The experiment with the slot inputs the drive's model does not read: `t` [s] and
+    the recorded force `u` (the target)."""
+    arrays = dict(e.arrays)
+    arrays["t"] = np.asarray(e.t, float)
+    arrays["u"] = np.asarray(e.arrays["y"], float)
+    return dataclasses.replace(e, arrays=arrays)
+
+
+def _stack(exps: Sequence[Experiment], keys) -> dict[str, np.ndarray]:
+    n_max = max(e.n for e in exps)
+    out = {}
+    for k in keys:
+        cols = []
+        for e in exps:
+            x = np.asarray(e.arrays[k], float)
+            if x.ndim == 2:
+                x = np.pad(x, ((0, n_max - x.shape[0]), (0, 0)), mode="edge")
+            else:
+                x = np.pad(x, (0, n_max - x.size), mode="edge")
+            cols.append(x)
+        out[k] = np.stack(cols)
+    return out
+
+
+class _Basis:
+    """The flexible term's basis: cubic B-splines per slot input on quantile knots of the
+    calibration data, and its penalty (P-spline second differences plus a small ridge)."""
+
+    def __init__(self, cal: Sequence[Experiment], inputs: Mapping[str, str], n_basis: int):
+        self.inputs = dict(inputs)
+        self.compiled = None  # the basis on stacked experiments, compiled once
+        self.knots: dict[str, np.ndarray] = {}
+        self.blocks: dict[str, slice] = {}
+        k0 = 0
+        for label, key in self.inputs.items():
+            src = "t" if key == "v*t" else key
+            x = np.concatenate([np.asarray(e.arrays[src], float) for e in cal])
+            if key == "u":
+                # the recorded force is the target: a term in it may not contain the
+                # identity (it would predict the force from itself), so only its excess
+                # beyond levels at high quantiles acts, on each side: `(u − k)₊`, `(u + k)₋`
+                self.knots[label] = np.quantile(np.abs(x), (0.5, 0.7, 0.8, 0.9, 0.95))
+                k = 2 * self.knots[label].size
+            else:
+                # a ripple of many periods over the travel needs many knots in position
+                nb = {"v*t": max(4, n_basis - 2), "q": 3 * n_basis}.get(key, n_basis)
+                self.knots[label] = quantile_knots(x, nb)
+                k = self.knots[label].size - 4
+            self.blocks[label] = slice(k0, k0 + k)
+            k0 += k
+        self.size = k0
+
+    def __call__(self, d: Mapping[str, Any]) -> jnp.ndarray:
+        cols = []
+        for label, key in self.inputs.items():
+            if key == "v*t":
+                b = jnp.asarray(d["v"])[:, None] * bspline_basis(d["t"], self.knots[label])
+            elif key == "u":
+                u = jnp.asarray(d["u"])[:, None]
+                lv = jnp.asarray(self.knots[label])[None, :]
+                b = jnp.concatenate([jnp.maximum(u - lv, 0.0), jnp.minimum(u + lv, 0.0)], -1)
+            else:
+                b = bspline_basis(d[key], self.knots[label])
+            cols.append(b)
+        return jnp.concatenate(cols, axis=-1)
+
+    def penalty(self, n: int, lam: float, ridge: float) -> np.ndarray:
+        rows = []
+        for label, key in self.inputs.items():
+            sl = self.blocks[label]
+            k = sl.stop - sl.start
+            if key == "u":
+                continue  # hinges: the ridge only
+            d2 = np.zeros((k - 2, self.size))
+            d2[:, sl] = difference_penalty(k, 2)
+            rows.append(math.sqrt(lam * n / k) * d2)
+        rows.append(math.sqrt(ridge * n / self.size) * np.eye(self.size))
+        return np.concatenate(rows)
+
+    def masks(self) -> tuple[list[str], np.ndarray]:
+        labels = list(self.inputs) + ["all"]
+        m = np.zeros((len(labels) + 1, self.size))  # the last row: no flexible term
+        for i, label in enumerate(self.inputs):
+            m[i, self.blocks[label]] = 1.0
+        m[len(self.inputs)] = 1.0
+        return labels, m
+
+
+# ------------------------------------------------------------------------------ LM fits
+
+
+def _split(model: GapModel):
+    cm = model.constrained()
+    params, static = eqx.partition(cm, free_spec(cm))
+    flat, unravel = ravel_pytree(params)
+    return flat, unravel, static
+
+
+@eqx.filter_jit
+def _fit_flexible(params, static, inputs, y, wfit, phi, pen, masks, max_steps):
+    """Model and flexible term calibrated jointly by LM, once per mask (vmapped): the
+    parameters, the prediction on every experiment and the final cost.
+
+    The normal equations are formed in blocks: the flexible term's Jacobian is its basis
+    (known), so only the model's parameters take a Jacobian-vector product per step, and
+    the basis Gram matrix is formed once per data set."""
+    flat, unravel = ravel_pytree(params)
+    p = flat.size
+    phw = phi * wfit[..., None]  # (e, n, K): the weighted flexible Jacobian
+    gram = jnp.einsum("enk,enj->kj", phw, phw) + pen.T @ pen
+
+    def model_pred(tm):
+        return jax.vmap(unwrap(eqx.combine(unravel(tm), static)))(inputs)
+
+    def predict(theta, mask):
+        return model_pred(theta[:p]) + jnp.einsum("enk,k->en", phi, theta[p:] * mask)
+
+    def evaluate(theta, mask):
+        tm, c = theta[:p], theta[p:]
+        ym, jm = jax.vmap(lambda v: jax.jvp(model_pred, (tm,), (v,)), out_axes=(None, 0))(
+            jnp.eye(p, dtype=tm.dtype)
+        )
+        r = (ym + jnp.einsum("enk,k->en", phi, c * mask) - y) * wfit
+        jm = jm * wfit  # (p, e, n)
+        rp = pen @ c
+        jtj_mm = jnp.einsum("pen,qen->pq", jm, jm)
+        jtj_fm = jnp.einsum("enk,pen->kp", phw, jm) * mask[:, None]
+        jtj_ff = gram * jnp.outer(mask, mask) + pen.T @ pen * (1 - jnp.outer(mask, mask))
+        jtj = jnp.block([[jtj_mm, jtj_fm.T], [jtj_fm, jtj_ff]])
+        jtr = jnp.concatenate(
+            [jnp.einsum("pen,en->p", jm, r), jnp.einsum("enk,en->k", phw, r) * mask + pen.T @ rp]
+        )
+        return 0.5 * (jnp.sum(r * r) + jnp.sum(rp * rp)), jtj, jtr
+
+    theta0 = jnp.concatenate([flat, jnp.zeros(phi.shape[-1], flat.dtype)])
+
+    def one(mask):
+        st = lm_init(evaluate, theta0, mask, 1e-10)
+        st = jax.lax.while_loop(
+            lambda s: lm_running(s, max_steps),
+            lambda s: lm_step(evaluate, None, s, mask, 1e-10),
+            st,
+        )
+        return st.theta, predict(st.theta, mask), st.cost
+
+    return jax.vmap(one)(masks)
+
+
+def _flexible_step(model, exps, n_cal, basis, scale, masks, pen, max_steps=40):
+    """Fit every mask on one data set; returns (thetas, predictions (masks, exp, n))."""
+    keys = set(exps[0].arrays)
+    st = _stack(exps, sorted(keys))
+    w = np.zeros((len(exps), st["y"].shape[1]))
+    for i, e in enumerate(exps):
+        if i < n_cal:
+            w[i, : e.n] = scale
+    inputs = {k: jnp.asarray(v) for k, v in st.items()}
+    phi = _basis_values(basis, inputs)
+    flat, unravel, static = _split(model)
+    params = unravel(flat)
+    thetas, preds, _ = _fit_flexible(
+        params,
+        static,
+        inputs,
+        jnp.asarray(st["y"]),
+        jnp.asarray(w),
+        phi,
+        jnp.asarray(pen),
+        jnp.asarray(masks),
+        max_steps,
+    )
+    return np.asarray(thetas), np.asarray(preds), flat.size, np.asarray(phi)
+
+
+def _basis_values(basis, inputs):
+    """The flexible basis on stacked experiments `(e, n, K)`, in one compiled call."""
+    keys = ("v", "q", "a", "u", "t")
+    if basis.compiled is None:
+        basis.compiled = jax.jit(jax.vmap(basis))
+    return basis.compiled({k: inputs[k] for k in keys})
+
+
+def _residuals(exps, pred):
+    return [e.y - pred[i, : e.n] for i, e in enumerate(exps)]
+
+
+def _val_reductions(exps, n_cal, preds) -> np.ndarray:
+    """Held-out nrmse reduction of every mask against the last (no flexible term)."""
+    y = np.concatenate([e.y for e in exps[n_cal:]])
+    gaps = np.array([nrmse(np.concatenate(_residuals(exps, p)[n_cal:]), y) for p in preds])
+    return gaps[-1] - gaps[:-1]
+
+
+# ------------------------------------------------------------------------------ formula
+
+
+def _screen(members: list[Member], X: list[np.ndarray], B: np.ndarray, r: np.ndarray, keep: int):
+    """The `keep` best grid members of every kind by their single-term fit to the
+    residual `r` with the base `B` profiled out."""
+    Q, _ = np.linalg.qr(B)
+    rr = r - Q @ (Q.T @ r)
+    score = []
+    for x in X:
+        xr = x - Q @ (Q.T @ x)
+        coef, *_ = np.linalg.lstsq(xr, rr, rcond=None)
+        score.append(float(np.sum((xr @ coef) ** 2)))
+    by_kind: dict[str, list[int]] = {}
+    for i, m in enumerate(members):
+        by_kind.setdefault(m.kind.name, []).append(i)
+    chosen = []
+    for idx in by_kind.values():
+        chosen += sorted(idx, key=lambda i: -score[i])[:keep]
+    return sorted(chosen)
+
+
+@eqx.filter_jit
+def _fit_formula(params, static, inputs, y, wfit, coefs0, logs0, lo, hi, fns, max_steps):
+    """Model and formula calibrated jointly by LM; shapes in log. Returns θ, the
+    prediction, the Jacobian of the weighted residual and the weighted residual."""
+    flat, unravel = ravel_pytree(params)
+    p, k = flat.size, coefs0.size
+
+    def formula(c, logs, d):
+        out, i = 0.0, 0
+        for j, (fn, ncol, _) in enumerate(fns):
+            cols = fn(d, jnp.exp(logs[j]))
+            out = out + cols @ c[i : i + ncol]
+            i += ncol
+        return out
+
+    def predict(theta):
+        m = unwrap(eqx.combine(unravel(theta[:p]), static))
+        c, logs = theta[p : p + k], theta[p + k :]
+        return jax.vmap(lambda d: m(d) + formula(c, logs, d))(inputs)
+
+    # the log shape of a shapeless kind is carried with a zero Jacobian: LM leaves it
+    def resid(theta, args):
+        return ((predict(theta) - y) * wfit).ravel()
+
+    def feasible(theta):  # shapes inside their bounds (a force limit above the median |u|)
+        return jnp.all((theta[p + k :] > lo) & (theta[p + k :] < hi))
+
+    evaluate = jacobian_normal_equations(resid)
+    theta0 = jnp.concatenate([flat, coefs0, logs0])
+    st = lm_init(evaluate, theta0, None, 1e-10)
+    st = jax.lax.while_loop(
+        lambda s: lm_running(s, max_steps),
+        lambda s: lm_step(evaluate, feasible, s, None, 1e-10),
+        st,
+    )
+    return st.theta, predict(st.theta), st.jtj, resid(st.theta, None)
+
+
+# ------------------------------------------------------------------------------ entry
+
+
+def discover(
+    report_or_model: Any,
+    calibration: Sequence[Experiment] | None = None,
+    validation: Sequence[Experiment] | None = None,
+    *,
+    family: Any = "drive",
+    n_null: int = 19,
+    n_boot: int = 200,
+    n_stability: int = 50,
+    stability: float = 0.8,
+    min_shrink: float = 0.05,
+    min_share: float = 0.8,
+    n_basis: int = 8,
+    seed: int = 0,
+    progress: Any = None,
+) -> Discovered:
+    """Discover an effect outside the library: a flexible term in the family's slot,
+    scored against the null, then its formula from a typed dictionary (module doc).
+
+    **Arguments:**
+
+    - `report_or_model`: a [`DiagnosisReport`][jaxvs.diagnosis.DiagnosisReport] of
+        `jaxvs.diagnose` (its final model and experiments are used), or a calibrated
+        `GapModel`, with `calibration` and `validation` its prepared experiments (held
+        out: the validation experiments are never fitted).
+    - `family`: the family name (`"drive"`) or instance; taken from the report.
+    - `n_null`: effect-free records the discovery step is run on (the null that pays
+        for the choice of the input; default 19: the 95th percentile is about their
+        largest); `0` skips the null (threshold 0; for tests of the formula only).
+    - `n_boot`: bootstrap resamples of the held-out intervals.
+    - `n_stability`, `stability`: block-bootstrap resamples of the stability selection
+        and the share of them a kind must survive in (default 50, 0.8).
+    - `min_shrink`: the flexible term must remove at least this share of the held-out gap.
+    - `min_share`: the formula must remove at least this share of what the flexible
+        term removes to be *found*.
+    - `n_basis`: B-splines per slot input (cubic, default 8).
+    - `seed`: seed of the null records and the resamples.
+    - `progress`: optional `callable(str)` told what runs.
+
+    **Returns:** a [`Discovered`][jaxvs.diagnosis.Discovered].
+    """
+    from ._diagnose import FAMILIES
+
+    t0 = time.perf_counter()
+    say = progress or (lambda msg: None)
+    if calibration is None:
+        rep = report_or_model
+        if getattr(rep, "final_model", None) is None or not getattr(rep, "calibration", None):
+            raise ValueError(
+                "discover: give a DiagnosisReport with its final model and experiments (a "
+                "report of a record that was not identifiable has none), or a calibrated "
+                "GapModel with its calibration and validation experiments."
+            )
+        model, calibration, validation = rep.final_model, rep.calibration, rep.validation
+        if isinstance(family, str):
+            # the report's family with its options: the null records go through the same
+            # preprocessing as the records
+            options = dict(rep.content.get("data", {}).get("options", {}))
+            family = FAMILIES[rep.family](**options)
+    else:
+        model = report_or_model
+        if not isinstance(model, GapModel):
+            raise TypeError(
+                f"discover: the model must be a jaxvs.diagnosis.GapModel; got "
+                f"{type(model).__name__}. Pass a DiagnosisReport, or GapModel(nominal) "
+                "with its experiments."
+            )
+        if not validation:
+            raise ValueError(
+                "discover: validation experiments are needed (the flexible term and the "
+                "formula are scored on data they were not fitted to)."
+            )
+    fam = FAMILIES[family]() if isinstance(family, str) else family
+    if fam.name != "drive":
+        raise ValueError(
+            f"discover: the {fam.name!r} family has no discovery slot yet; the drive family "
+            "has the slot 'additional force on the axis'."
+        )
+    if not (isinstance(n_null, int) and n_null >= 0):
+        raise ValueError(f"discover: n_null must be an integer >= 0; got {n_null!r}.")
+    if not 0 < stability <= 1:
+        raise ValueError(f"discover: stability must lie in (0, 1]; got {stability!r}.")
+    rng = np.random.default_rng(seed)
+    cal = [_slot_experiment(e) for e in calibration]
+    val = [_slot_experiment(e) for e in validation]
+    exps = cal + val
+    n_cal = len(cal)
+    y_cal = np.concatenate([e.y for e in cal])
+    scale = 1.0 / max(float(np.sqrt(np.mean(y_cal**2))), 1e-300)
+    n_samples = int(sum(e.n for e in cal))
+
+    basis = _Basis(cal, _DRIVE_INPUTS, n_basis)
+    pen = basis.penalty(n_samples, lam=1e-3, ridge=1e-7) * scale
+    labels, masks = basis.masks()
+
+    # 1. the flexible term on the records
+    say("discovery: the flexible term, input by input")
+    thetas, preds, p_model, _ = _flexible_step(model, exps, n_cal, basis, scale, masks, pen)
+    red = _val_reductions(exps, n_cal, preds)
+    y_val = np.concatenate([e.y for e in val])
+    e0 = np.concatenate(_residuals(exps, preds[-1])[n_cal:])
+    blen = block_length(e0)
+    inputs: dict[str, dict[str, Any]] = {}
+    for i, label in enumerate(labels):
+        e1 = np.concatenate(_residuals(exps, preds[i])[n_cal:])
+        _, _, sh, d_int, s_int = gap_change_interval(
+            e0, e1, y_val, length=blen, n_boot=n_boot, seed=seed
+        )
+        inputs[label] = {
+            "reduction": float(red[i]),
+            "reduction_interval": list(d_int),
+            "shrink": float(sh),
+            "shrink_interval": list(s_int),
+        }
+    singles = labels[:-1]
+    best = max(singles, key=lambda lab: inputs[lab]["reduction"])
+    ib = labels.index(best)
+
+    # 2. the null: the same step on effect-free records
+    null_red: list[float] = []
+    if n_null:
+        say(f"discovery: the same step on {n_null} effect-free records")
+        nom = GapModel(unwrap(model).nominal)
+        sets = fam.null_experiments(nom, list(calibration) + list(validation), rng, n_null)
+        for s in sets:
+            s = [_slot_experiment(e) for e in s]
+            _, p_null, _, _ = _flexible_step(nom, s, n_cal, basis, scale, masks, pen)
+            null_red.append(float(np.max(_val_reductions(s, n_cal, p_null)[:-1])))
+    thr = float(np.quantile(null_red, 0.95)) if null_red else 0.0
+    fb = inputs[best]
+    fired = fb["reduction"] > thr and fb["reduction_interval"][0] > 0 and fb["shrink"] >= min_shrink
+    flexible = {
+        "input": best,
+        **fb,
+        "null_threshold": thr,
+        "null_reductions": null_red,
+    }
+    out = Discovered(
+        slot=SLOT_FORCE,
+        fired=bool(fired),
+        input=best if fired else None,
+        inputs=inputs,
+        flexible=flexible,
+        evidence="linear-Gaussian evidence, Zellner g-prior with g = N_eff (unit information)",
+    )
+    if not fired:
+        why = []
+        if fb["reduction"] <= thr:
+            why.append(
+                f"its held-out reduction {fb['reduction']:.3g} is within the null (95th "
+                f"percentile {thr:.3g})"
+            )
+        if fb["reduction_interval"][0] <= 0:
+            why.append("its bootstrap interval includes zero")
+        if fb["shrink"] < min_shrink:
+            why.append(f"its shrink {fb['shrink']:.3g} is below {min_shrink:g}")
+        out.message = (
+            "nothing to discover: the flexible term's gain is not real (" + "; ".join(why) + ")"
+        )
+        out.seconds = time.perf_counter() - t0
+        return out
+
+    # 3. the formula
+    say("discovery: the formula (evidence elimination, stability selection)")
+    cal_d = {
+        k: np.concatenate([np.asarray(e.arrays[k], float) for e in cal])
+        for k in ("v", "q", "a", "u", "t")
+    }
+    members = drive_force_dictionary(cal_d)
+    # each shape stays within a factor 3 of its grid (a shape that runs away turns its
+    # term into another kind: a Stribeck speed at infinity is a sign law)
+    bounds: dict[str, tuple[float, float]] = {}
+    for m in members:
+        if m.shape is not None:
+            lo_, hi_ = bounds.get(m.kind.name, (np.inf, -np.inf))
+            bounds[m.kind.name] = (min(lo_, m.shape), max(hi_, m.shape))
+    if best != "force":
+        # the recorded force is the target: a term in it enters the formula only when
+        # the flexible term says the gap lives there (else it stands in for any term
+        # correlated with the force, the noise included)
+        members = [m for m in members if "u" not in m.kind.inputs]
+    X = [m.evaluate(cal_d) for m in members]
+    flat0 = thetas[-1][:p_model]
+    r_cal = np.concatenate(_residuals(exps, preds[-1])[:n_cal])
+    B = _base_jacobian(model, flat0, cal)
+    chosen = _screen(members, X, B, r_cal, keep=2)
+    members = [members[i] for i in chosen]
+    X = [X[i] for i in chosen]
+    cols, groups, k0 = [], [], 0
+    for x in X:
+        cols.append(x)
+        groups.append(list(range(k0, k0 + x.shape[1])))
+        k0 += x.shape[1]
+    Xm = np.concatenate(cols, axis=1)
+    r_flex = np.concatenate(_residuals(exps, preds[labels.index("all")])[:n_cal])
+    # the selection on every `stride`-th sample (at most 4000): the terms are smooth and
+    # the residual correlated over many samples, so this loses no evidence (N_eff is
+    # measured on the same rows)
+    stride = max(1, -(-r_cal.size // 4000))
+    rows = slice(None, None, stride)
+    Xs, rs, Bs, r_fs = Xm[rows], r_cal[rows], B[rows], r_flex[rows]
+    n_eff = effective_samples(r_fs)
+    full = backward_elimination(Xs, rs, groups, base=Bs, n_eff=n_eff)
+    idx = block_bootstrap_indices(rs.size, block_length(r_fs), n_stability, rng)
+    _, supports = stability_selection(Xs, rs, groups, resamples=idx, base=Bs, n_eff=n_eff)
+    kinds = sorted({m.kind.name for m in members})
+    freq = {
+        k: float(np.mean([any(members[j].kind.name == k for j in s) for s in supports]))
+        for k in kinds
+    }
+    member_freq = np.zeros(len(members))
+    for s in supports:
+        member_freq[list(s)] += 1
+    member_freq /= max(len(supports), 1)
+    kept_kinds = [k for k in kinds if freq[k] >= stability]
+    final_members: list[int] = []
+    for k in kept_kinds:
+        # one member per kind: the shape is calibrated afterwards, so a second grid
+        # member of the kind would only split the same term in two
+        in_full = [j for j in full.support if members[j].kind.name == k]
+        if in_full:
+            final_members.append(max(in_full, key=lambda j: member_freq[j]))
+        else:
+            cand = [j for j in range(len(members)) if members[j].kind.name == k]
+            final_members.append(max(cand, key=lambda j: member_freq[j]))
+    final_members = sorted(final_members)
+    out.frequencies = freq
+
+    # flexible term's shape over its input (for the figure)
+    out.shape = _shape(exps, n_cal, basis, thetas[ib], p_model, best, preds[-1])
+    if not final_members:
+        for k in ("_keep", "_v", "_step"):
+            out.shape.pop(k)
+        out.message = (
+            "no formula found: no term of the dictionary is kept in "
+            f"{stability:.0%} of the resamples; the flexible term's shape over {best} is "
+            "the answer"
+        )
+        out.seconds = time.perf_counter() - t0
+        return out
+
+    fm = [members[j] for j in final_members]
+    c0 = np.concatenate(
+        [full.coefficients.get(j, np.zeros(members[j].kind.k)) for j in final_members]
+    )
+    if not np.all(np.isfinite(c0)) or not all(j in full.support for j in final_members):
+        # a kept kind the full-data elimination dropped: start from least squares of the
+        # kept terms with the model's Jacobian beside them
+        A = np.concatenate([Bs] + [X[j][rows] for j in final_members], 1)
+        c0 = np.linalg.lstsq(A, rs, rcond=None)[0][Bs.shape[1] :]
+    logs0 = np.log([m.shape if m.shape is not None else 1.0 for m in fm])
+    say("discovery: recalibrating the formula")
+    med_u = float(np.median(np.abs(cal_d["u"])))
+    lo = np.array(
+        [np.log(bounds[m.kind.name][0] / 3) if m.shape is not None else -np.inf for m in fm]
+    )
+    hi = np.array(
+        [np.log(bounds[m.kind.name][1] * 3) if m.shape is not None else np.inf for m in fm]
+    )
+    lo = np.where([m.kind.shape == "F" for m in fm], np.log(med_u), lo)  # a limit, not u
+    logs0 = np.clip(logs0, lo + 1e-9, hi - 1e-9)
+    fit = _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi)
+    theta, pred_f, jtj, r_w = fit
+    p = p_model
+    k = int(sum(m.kind.k for m in fm))
+    e_f = np.concatenate(_residuals(exps, pred_f)[n_cal:])
+    _, _, sh_f, d_f, s_f = gap_change_interval(
+        e0, e_f, y_val, length=blen, n_boot=n_boot, seed=seed
+    )
+    red_f = nrmse(e0, y_val) - nrmse(e_f, y_val)
+    share = red_f / fb["reduction"] if fb["reduction"] > 0 else float("nan")
+
+    # intervals: Gauss–Newton covariance, inflated by the integrated autocorrelation time
+    r_cal_f = np.concatenate(_residuals(exps, pred_f)[:n_cal])
+    n_par = theta.size
+    shaped = np.array([m.shape is not None for m in fm])
+    free = np.concatenate([np.ones(p + k, bool), shaped])
+    cov = _covariance(jtj, r_w, free, n_samples, r_cal_f)
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    terms, i = [], p
+    sym_x = _symbols()
+    expr = 0
+    for j, m in enumerate(fm):
+        c = theta[i : i + m.kind.k]
+        ci = [
+            [float(c[a] - 1.96 * sd[i + a]), float(c[a] + 1.96 * sd[i + a])]
+            for a in range(m.kind.k)
+        ]
+        i += m.kind.k
+        term: dict[str, Any] = {
+            "kind": m.kind.name,
+            "coefficients": [float(x) for x in c],
+            "intervals": ci,
+            "frequency": freq[m.kind.name],
+        }
+        shape_val = None
+        if m.shape is not None:
+            ls = theta[p + k + j]
+            lsd = sd[p + k + j]
+            shape_val = float(np.exp(ls))
+            term["shape"] = {
+                "name": m.kind.shape,
+                "value": shape_val,
+                "interval": [float(np.exp(ls - 1.96 * lsd)), float(np.exp(ls + 1.96 * lsd))],
+                "unit": m.kind.unit.strip(),
+            }
+        terms.append(term)
+        expr = expr + m.kind.sympy([_num4(x) for x in c], shape_val, sym_x)
+    del n_par
+    out.terms = terms
+    out.expression = expr
+    out.formula = str(expr)
+    out.shrink, out.shrink_interval = float(sh_f), (float(s_f[0]), float(s_f[1]))
+    out.reduction, out.reduction_interval = float(red_f), (float(d_f[0]), float(d_f[1]))
+    out.share = float(share)
+    out.nearest_effect, out.named_instead = nearest_named([m.kind.name for m in fm], DRIVE_NAMED)
+    ok = d_f[0] > 0 and red_f > thr and share >= min_share
+    out.found = bool(ok)
+    out.shape["formula"] = _formula_on(exps, n_cal, pred_f, preds[-1], out.shape)
+    if not ok:
+        out.message = (
+            f"no formula found: the best formula {out.formula} removes {share:.0%} of what the "
+            f"flexible term removes (needs {min_share:.0%}, an interval excluding zero and "
+            f"more than the null); the flexible term's shape over {best} is the answer"
+        )
+    elif out.named_instead:
+        out.message = (
+            f"the formula's terms are those of the library effect {out.nearest_effect}: "
+            f"report {out.nearest_effect} (formula {out.formula})"
+        )
+    else:
+        out.message = (
+            f"formula found: {out.formula} (removes {out.shrink:.0%} of the held-out gap, "
+            f"{share:.0%} of the flexible term's reduction)"
+        )
+    out.seconds = time.perf_counter() - t0
+    return out
+
+
+def _num4(x) -> float:
+    return float(f"{float(x):.4g}")
+
+
+def _symbols():
+    import sympy as sp
+
+    return {n: sp.Symbol(n, real=True) for n in ("v", "q", "a", "u", "t")}
+
+
+def _base_jacobian(model, flat, cal) -> np.ndarray:
+    """Jacobian of the model's prediction on the calibration samples with respect to its
+    free parameters (the columns the selection profiles out)."""
+    _, unravel, static = _split(model)
+
+    def pred(theta, d):
+        return unwrap(eqx.combine(unravel(theta), static))(d)
+
+    jac = eqx.filter_jit(jax.jacfwd(pred))
+    return np.concatenate([np.asarray(jac(jnp.asarray(flat), e.jax_arrays())) for e in cal])
+
+
+def _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi):
+    _, unravel, static = _split(model)
+    st = _stack(exps, sorted(exps[0].arrays))
+    w = np.zeros((len(exps), st["y"].shape[1]))
+    for i, e in enumerate(exps[:n_cal]):
+        w[i, : e.n] = scale
+    fns = tuple((m.kind.columns, m.kind.k, m.shape is not None) for m in fm)
+    theta, pred, jtj, r_w = _fit_formula(
+        unravel(jnp.asarray(flat0)),
+        static,
+        {k: jnp.asarray(v) for k, v in st.items()},
+        jnp.asarray(st["y"]),
+        jnp.asarray(w),
+        jnp.asarray(c0, float),
+        jnp.asarray(logs0, float),
+        jnp.asarray(lo, float),
+        jnp.asarray(hi, float),
+        fns,
+        100,
+    )
+    return np.asarray(theta), np.asarray(pred), np.asarray(jtj), np.asarray(r_w)
+
+
+def _covariance(jtj, r_w, free, n, residual) -> np.ndarray:
+    """`s² τ (JᵀJ)⁻¹` on the free parameters (fixed ones: zero variance); `s²` from the
+    weighted residual, `τ` its integrated autocorrelation time (at least 1)."""
+    idx = np.flatnonzero(free)
+    dof = max(n - idx.size, 1)
+    s2 = float(np.sum(r_w**2)) / dof
+    tau = max(1.0, integrated_time(residual) or 1.0)
+    cov = np.zeros_like(jtj)
+    sub = jtj[np.ix_(idx, idx)]
+    cov[np.ix_(idx, idx)] = np.linalg.pinv(sub) * s2 * tau
+    return cov
+
+
+def _shape(exps, n_cal, basis, theta, p, label, pred0) -> dict[str, Any]:
+    """The flexible term of input `label` over its input, on the calibration samples:
+    `x`, the term `flexible`, the partial residual `partial` (the residual without the
+    flexible term). For the term `v·f(t)` the figure is the viscous coefficient `f(t)`
+    over time (term and residual divided by `v` where the speed is above 30 % of its top)."""
+    key = basis.inputs[label]
+    c = np.asarray(theta[p:])
+    sl = basis.blocks[label]
+    xs, fl, pr, vs = [], [], [], []
+    for i, e in enumerate(exps[:n_cal]):
+        d = {k: jnp.asarray(e.arrays[k])[None] for k in ("v", "q", "a", "u", "t")}
+        phi = np.asarray(_basis_values(basis, d))[0]
+        xs.append(np.asarray(e.arrays["t" if key == "v*t" else key]))
+        fl.append(phi[:, sl] @ c[sl])
+        pr.append(e.y - pred0[i, : e.n])
+        vs.append(np.asarray(e.arrays["v"]))
+    x, f, r, v = (np.concatenate(z) for z in (xs, fl, pr, vs))
+    per_v = key == "v*t"
+    keep = np.abs(v) > 0.3 * np.max(np.abs(v)) if per_v else np.ones(x.size, bool)
+    if per_v:
+        f, r = f / np.where(keep, v, 1.0), r / np.where(keep, v, 1.0)
+    x, f, r = x[keep], f[keep], r[keep]
+    step = max(1, x.size // 3000)
+    names = {
+        "v": "velocity [m/s]",
+        "q": "position [m]",
+        "a": "acceleration [m/s²]",
+        "t": "time [s]",
+        "v*t": "time [s]",
+    }
+    return {
+        "label": names[key],
+        "ylabel": "viscous coefficient f(t) [N·s/m]" if per_v else "additional force [N]",
+        "input": label,
+        "x": x[::step],
+        "flexible": f[::step],
+        "partial": r[::step],
+        "_keep": keep,
+        "_v": v,
+        "_step": step,
+    }
+
+
+def _formula_on(exps, n_cal, pred_f, pred0, shape) -> np.ndarray:
+    """The formula's contribution on the samples of the figure (the formula fit minus
+    the fit without it), divided by `v` where the figure shows `f(t)`."""
+    d = np.concatenate([pred_f[i, : e.n] - pred0[i, : e.n] for i, e in enumerate(exps[:n_cal])])
+    keep, v = shape.pop("_keep"), shape.pop("_v")
+    if shape["ylabel"].startswith("viscous"):
+        d = d / np.where(keep, v, 1.0)
+    return d[keep][:: shape.pop("_step")]
