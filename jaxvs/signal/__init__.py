@@ -1,5 +1,12 @@
-"""Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows."""
+"""Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows,
+filtering, resampling, the moving-block bootstrap of autocorrelated series."""
 
+from ._bootstrap import (
+    block_bootstrap_indices as block_bootstrap_indices,
+    block_bootstrap_means as block_bootstrap_means,
+    block_length as block_length,
+    integrated_time as integrated_time,
+)
 from ._cwt import (
     CWTDamping as CWTDamping,
     cwt_damping as cwt_damping,
