@@ -175,7 +175,15 @@ def load_renamed(
     mapping = _check_map(signals, "load")
     if "t" in mapping and "time" not in options:
         options["time"] = _bare(mapping["t"])
-    loaded = load(path, **options)
+    try:
+        loaded = load(path, **options)
+    except ValueError as err:
+        if "no time column" not in str(err):
+            raise
+        raise ValueError(
+            f"{err} In jaxvs.diagnose, check and design: signals={{'t': '<column>'}}; on the "
+            "command line: --time <column>."
+        ) from None
     if not mapping:
         return loaded
     rest = {k: v for k, v in mapping.items() if k != "t"}
