@@ -4,6 +4,7 @@ the tracer test, and a matrix exponential that compiles fast."""
 
 import collections
 import concurrent.futures
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -24,6 +25,7 @@ __all__ = [
     "is_traced",
     "json_safe",
     "legendre",
+    "options_object",
     "polymul",
     "timed_call",
 ]
@@ -215,6 +217,29 @@ def timed_call(fn: Callable, *args: Any, mesh: Mesh | None = None) -> tuple[Any,
         assembled.append(jax.make_array_from_single_device_arrays(shape, sharding, blocks))
     out = eqx.combine(jax.tree_util.tree_unflatten(treedef, assembled), out_st)
     return out, compile_time, run_time
+
+
+def options_object(
+    cls: type, given: Any, keywords: dict[str, Any], who: str, argument: str = "options"
+) -> Any:
+    """The options object `cls` (a frozen dataclass) of the function `who`: the object
+    given as its `argument`, or one built from its fields passed as `keywords`
+    (`nperseg=...`), never both; a `TypeError` names unknown keywords and the fields."""
+    name = cls.__name__
+    if given is not None and keywords:
+        raise TypeError(
+            f"{who}: give the {name} options either as {argument}={name}(...) or as keywords "
+            f"({', '.join(keywords)}), not both."
+        )
+    if given is not None and not isinstance(given, cls):
+        raise TypeError(f"{who}: {argument} must be a {name}, got {type(given).__name__}.")
+    fields = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(keywords) - fields)
+    if unknown:
+        raise TypeError(
+            f"{who}: unknown option(s) {unknown}; the {name} options are {sorted(fields)}."
+        )
+    return cls(**keywords) if given is None else given
 
 
 def polymul(a: Array, b: Array) -> Array:
