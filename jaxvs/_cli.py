@@ -110,9 +110,23 @@ _OPTIONS: dict[str, tuple[tuple[str, ...], dict[str, Any]]] = {
         ("--encoding",),
         dict(default="utf-8", help="CSV text encoding (default utf-8; e.g. latin-1)"),
     ),
+    "signal": (
+        ("--signal",),
+        dict(
+            action="append",
+            default=[],
+            metavar="NAME=COLUMN",
+            help="read the file's column COLUMN as the signal NAME (repeatable), e.g. "
+            "--signal q=Position --signal u=Torque; units come from the header",
+        ),
+    ),
+    "time": (
+        ("--time",),
+        dict(default=None, metavar="COLUMN", help="the time column [s] when it is not named t"),
+    ),
     "debug": (("--debug",), dict(action="store_true", help="show tracebacks of errors")),
 }
-_READS_DATA = ("delimiter", "decimal", "encoding", "debug")
+_READS_DATA = ("signal", "time", "delimiter", "decimal", "encoding", "debug")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -272,16 +286,44 @@ def _options(args) -> dict[str, object]:
     return options
 
 
-def _load(paths: list[str], args) -> list[Any]:
-    """Read the files with the CSV dialect options (records named after their files)."""
-    from .data import Record, load
+def _signals(args) -> dict[str, str]:
+    """`--signal NAME=COLUMN ...` and `--time COLUMN` as one mapping `{NAME: COLUMN}`."""
+    mapping: dict[str, str] = {}
+    for text in args.signal:
+        name, sep, column = text.partition("=")
+        if not sep or not name.strip() or not column.strip():
+            raise UsageError(
+                f"--signal expects NAME=COLUMN such as q=Position (the column's name in the "
+                f"file), got {text!r}."
+            )
+        if name.strip() in mapping:
+            raise UsageError(f"--signal {name.strip()} is given twice; keep one.")
+        mapping[name.strip()] = column.strip()
+    if args.time is not None:
+        if not args.time.strip() or "t" in mapping:
+            raise UsageError(
+                "--time names the time column once, e.g. --time Zeit (not with --signal t=...)."
+            )
+        mapping["t"] = args.time.strip()
+    return mapping
 
+
+def _load(paths: list[str], args) -> list[Any]:
+    """Read the files with the CSV dialect options and the column mapping (`--signal`,
+    `--time`); records are named after their files."""
+    from .data import Record, load_renamed
+
+    signals = _signals(args)
     out = []
     for text in paths:
         _interrupt.stage(f"loading {text}")
         try:
-            loaded = load(
-                text, delimiter=args.delimiter, decimal=args.decimal, encoding=args.encoding
+            loaded = load_renamed(
+                text,
+                signals,
+                delimiter=args.delimiter,
+                decimal=args.decimal,
+                encoding=args.encoding,
             )
         except (ValueError, KeyError) as err:
             message = _one_line(err)
@@ -394,14 +436,17 @@ def _design(args) -> int:
     inputs = [s.strip() for s in args.inputs.split(",") if s.strip()] if args.inputs else None
     if args.inputs is not None and not inputs:
         raise UsageError("--inputs is empty; give signal names like T_chassis,v_m or leave it out.")
+    signals = _signals(args)
     folder = ReportFolder(args.out, [*args.data, *(args.validate or []), *samples])
     _x64()
     import jaxvs
 
+    raw = args.delimiter == "," and args.decimal == "." and args.encoding == "utf-8"
+
     def records(paths):
-        if args.delimiter == "," and args.decimal == "." and args.encoding == "utf-8":
+        if raw:
             return list(paths)  # design reads sparse (NaN) targets from the files itself
-        return _load(paths, args)
+        return _load(paths, args)  # renamed by --signal / --time here
 
     _interrupt.stage("loading the data")
     cal = records(args.data)
@@ -416,11 +461,14 @@ def _design(args) -> int:
         validation=val,
         hidden=hidden,
         progress=False if args.quiet else None,
+        signals=(signals or None) if raw else None,
         **{name: getattr(args, name) for name in same},
     )
     interrupted = bool(report["interrupted"])
     _interrupt.stage("writing the partial report" if interrupted else "writing the report")
-    report.save(folder.prepare(), figures=not args.no_figures)
+    from .plotting import plot_design
+
+    report.save(folder.prepare(), figures=None if args.no_figures else plot_design)
     out = folder.commit()
     if not args.quiet and not interrupted:
         print(report.to_markdown())

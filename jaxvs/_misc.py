@@ -3,6 +3,8 @@
 the tracer test, and a matrix exponential that compiles fast."""
 
 import collections
+import concurrent.futures
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -12,12 +14,24 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from jaxtyping import Array, Float
 
-__all__ = ["as_real", "check_finite", "concrete", "expm", "is_traced", "json_safe", "timed_call"]
+__all__ = [
+    "as_real",
+    "check_finite",
+    "concrete",
+    "expm",
+    "is_traced",
+    "json_safe",
+    "legendre",
+    "options_object",
+    "polymul",
+    "timed_call",
+]
 
 _CACHE: collections.OrderedDict = collections.OrderedDict()
-_CACHE_SIZE = 32
+_CACHE_SIZE = 64
 
 
 def as_real(x: Any, what: str) -> Array:
@@ -88,11 +102,21 @@ def is_traced(tree: Any) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
 
-def _key(fn: Callable, dynamic: Any, static: Any) -> Any:
-    dyn_leaves, dyn_def = jax.tree_util.tree_flatten(dynamic)
-    st_leaves, st_def = jax.tree_util.tree_flatten(static)
-    avals = tuple((x.shape, str(x.dtype), bool(getattr(x, "weak_type", False))) for x in dyn_leaves)
-    key = (fn, dyn_def, st_def, tuple(st_leaves), avals)
+def _local(x: Any, device: Any) -> Any:
+    """The block of a global array that lives on `device` (or the whole local value)."""
+    if isinstance(x, jax.Array) and len(x.sharding.device_set) > 1:
+        return next(s.data for s in x.addressable_shards if s.device == device)
+    return jax.device_put(x, device)
+
+
+def _lapack(executable: Any) -> bool:
+    try:
+        return "lapack" in executable.as_text()
+    except Exception:  # pragma: no cover - no HLO text: assume the worst
+        return True
+
+
+def _hashable(key: Any) -> Any:
     try:
         hash(key)
     except TypeError:  # an unhashable static leaf: compile without caching
@@ -100,41 +124,144 @@ def _key(fn: Callable, dynamic: Any, static: Any) -> Any:
     return key
 
 
-def timed_call(fn: Callable, *args: Any) -> tuple[Any, float, float]:
-    """Compile `fn(*args)` (arrays traced, everything else static), run it once.
+def timed_call(fn: Callable, *args: Any, mesh: Mesh | None = None) -> tuple[Any, float, float]:
+    """Compile `fn(*args)` (arrays traced, everything else static) and run it once; with a
+    `mesh`, once per device on that device's block.
+
+    With a `mesh`, the array arguments are global arrays laid over `mesh` along axis 0 (or
+    replicated); every device of this process runs the compiled `fn` on its own block,
+    asynchronously, and the outputs (members axis first) are assembled into global arrays
+    sharded the same way. No collective operation is involved, so no device waits for
+    another, and each member is computed exactly as on one device. (`jax.shard_map` and
+    XLA's SPMD partitioner are the usual tools; the first conflicts with lineax's
+    structure checks inside the solvers, the second inserts an all-reduce into the
+    vmapped solver's loop condition, which can stall on small CPU hosts.)
+
+    Compiled executables are cached (least recently used first out) by function, static
+    arguments, shapes and device.
 
     **Returns:**
 
-    `(output, compile_time, run_time)` in seconds; `compile_time` is 0 when a compiled
-    version for the same shapes and static arguments was cached.
+    `(output, compile_time, run_time)` in seconds; `compile_time` is 0 when every
+    executable was cached.
     """
     dynamic, static = eqx.partition(args, eqx.is_array)
-    key = _key(fn, dynamic, static)
-    entry = _CACHE.get(key) if key is not None else None
+    dyn_leaves, dyn_def = jax.tree_util.tree_flatten(dynamic)
+    st_leaves, st_def = jax.tree_util.tree_flatten(static)
+    if mesh is None:
+        devices = [None]
+    else:
+        devices = [d for d in mesh.devices.flat if d.process_index == jax.process_index()]
+    per_device = [dyn_leaves if d is None else [_local(x, d) for x in dyn_leaves] for d in devices]
+    avals = tuple(
+        (x.shape, str(x.dtype), bool(getattr(x, "weak_type", False))) for x in per_device[0]
+    )
+    out_static: list[Any] = []
+
+    def run(dyn):
+        out = fn(*eqx.combine(dyn, static))
+        out_dyn, out_st = eqx.partition(out, eqx.is_array)
+        out_static.append(out_st)
+        return out_dyn
+
+    keys = [_hashable((fn, dyn_def, st_def, tuple(st_leaves), avals, d)) for d in devices]
+    missing = [i for i, k in enumerate(keys) if k is None or k not in _CACHE]
     t0 = time.perf_counter()
-    if entry is None:
-        out_static = []
-
-        def run(dyn):
-            out = fn(*eqx.combine(dyn, static))
-            out_dyn, out_st = eqx.partition(out, eqx.is_array)
-            out_static.append(out_st)
-            return out_dyn
-
-        compiled = jax.jit(run).lower(dynamic).compile()
-        entry = (compiled, out_static[0])
-        if key is not None:
-            _CACHE[key] = entry
-            if len(_CACHE) > _CACHE_SIZE:
-                _CACHE.popitem(last=False)
-    elif key is not None:
-        _CACHE.move_to_end(key)
+    fresh: dict[int, Any] = {}
+    if missing:
+        jitted = jax.jit(run)
+        lowered = {
+            i: jitted.lower(jax.tree_util.tree_unflatten(dyn_def, per_device[i])) for i in missing
+        }
+        if len(missing) == 1:
+            compiled = {missing[0]: lowered[missing[0]].compile()}
+        else:
+            # XLA compiles one executable per device; the compilations run in threads (XLA
+            # releases the GIL), which halves the wait on a 2-core host with several devices.
+            with concurrent.futures.ThreadPoolExecutor(max_workers=min(len(missing), 8)) as pool:
+                compiled = dict(zip(missing, pool.map(lambda i: lowered[i].compile(), missing)))
+        for i in missing:
+            d = devices[i]
+            serial = d is not None and d.platform == "cpu" and _lapack(compiled[i])
+            fresh[i] = (compiled[i], out_static[0], serial)
+            if keys[i] is not None:
+                _CACHE[keys[i]] = fresh[i]
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    for k in keys:
+        if k is not None and k in _CACHE:
+            _CACHE.move_to_end(k)
     compile_time = time.perf_counter() - t0
-    compiled, out_static = entry
+    executables = [fresh[i] if i in fresh else _CACHE[k] for i, k in enumerate(keys)]
     t1 = time.perf_counter()
-    out_dyn = jax.block_until_ready(compiled(dynamic))
+    outs = []
+    for (exe, _, serial), leaves in zip(executables, per_device):
+        outs.append(exe(jax.tree_util.tree_unflatten(dyn_def, leaves)))
+        if serial:
+            # heuristic: XLA's CPU runtime can stall when programs with LAPACK calls
+            # (the solvers' QR / SVD) run on two host devices at once on a small machine;
+            # such blocks run one after another (GPUs and other hosts run concurrently).
+            jax.block_until_ready(outs[-1])
+    outs = jax.block_until_ready(outs)
     run_time = time.perf_counter() - t1
-    return eqx.combine(out_dyn, out_static), compile_time, run_time
+    out_st = executables[0][1]
+    if mesh is None:
+        return eqx.combine(outs[0], out_st), compile_time, run_time
+    sharding = NamedSharding(mesh, PartitionSpec(mesh.axis_names[0]))
+    flat = [jax.tree_util.tree_flatten(o) for o in outs]
+    treedef = flat[0][1]
+    assembled = []
+    for i, x in enumerate(flat[0][0]):
+        blocks = [f[0][i] for f in flat]
+        shape = (x.shape[0] * mesh.devices.size,) + x.shape[1:]
+        assembled.append(jax.make_array_from_single_device_arrays(shape, sharding, blocks))
+    out = eqx.combine(jax.tree_util.tree_unflatten(treedef, assembled), out_st)
+    return out, compile_time, run_time
+
+
+def options_object(
+    cls: type, given: Any, keywords: dict[str, Any], who: str, argument: str = "options"
+) -> Any:
+    """The options object `cls` (a frozen dataclass) of the function `who`: the object
+    given as its `argument`, or one built from its fields passed as `keywords`
+    (`nperseg=...`), never both; a `TypeError` names unknown keywords and the fields."""
+    name = cls.__name__
+    if given is not None and keywords:
+        raise TypeError(
+            f"{who}: give the {name} options either as {argument}={name}(...) or as keywords "
+            f"({', '.join(keywords)}), not both."
+        )
+    if given is not None and not isinstance(given, cls):
+        raise TypeError(f"{who}: {argument} must be a {name}, got {type(given).__name__}.")
+    fields = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(keywords) - fields)
+    if unknown:
+        raise TypeError(
+            f"{who}: unknown option(s) {unknown}; the {name} options are {sorted(fields)}."
+        )
+    return cls(**keywords) if given is None else given
+
+
+def polymul(a: Array, b: Array) -> Array:
+    """Product of polynomials along the last axis (a batched `jnp.polymul`, coefficients
+    highest power first); leading axes broadcast."""
+    n, m = a.shape[-1], b.shape[-1]
+    shape = jnp.broadcast_shapes(a.shape[:-1], b.shape[:-1]) + (n + m - 1,)
+    out = jnp.zeros(shape, jnp.result_type(a, b))
+    for j in range(m):
+        out = out.at[..., j : j + n].add(a * b[..., j : j + 1])
+    return out
+
+
+def legendre(x: Array, degree: int) -> Array:
+    """`(P_1(x), ..., P_degree(x))` along a new last axis, by Bonnet's recursion
+    `(k + 1) P_{k+1} = (2k + 1) x P_k - k P_{k-1}` (`P_0 = 1` is left out)."""
+    p_prev, p = jnp.ones_like(x), x
+    out = [p]
+    for k in range(1, degree):
+        p_prev, p = p, ((2 * k + 1) * x * p - k * p_prev) / (k + 1)
+        out.append(p)
+    return jnp.stack(out, axis=-1)
 
 
 # Padé (7, 7) coefficients of exp (Higham, "The scaling and squaring method for the matrix

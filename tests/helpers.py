@@ -138,6 +138,56 @@ def _drive_axis():
     return ModelCase(m, u, 1e-3, lambda m: (m.mechanics.mass,), [], rtol=1e-4)
 
 
+def _oscillator_chain():
+    # two masses, first mode ~ 140 rad/s: a force on each mass, both displacements out
+    m = jaxvs.OscillatorChain([1.0, 0.5], [4e4, 2e4], [20.0, 10.0])
+    u = jnp.stack([_prbs(300), _prbs(300, 1)], axis=1)
+    errors = [
+        (
+            lambda: jaxvs.OscillatorChain([1.0, 0.5], [4e4], [20.0]),
+            ValueError,
+            "has 2 springs",
+        )
+    ]
+    return ModelCase(m, u, 1e-3, lambda m: (m.stiffnesses,), errors)
+
+
+def _stable_tmf():
+    tf = jaxvs.RationalTF(jnp.array([1.0, 40.0, 4e4]), jnp.array([1.0, 60.0, 4e4]))
+    m = jaxvs.models.StableTMF.from_rational(tf, 200.0, 1e-3)
+    errors = [
+        (
+            lambda: jaxvs.models.StableTMF(
+                jnp.array([1.0, jnp.nan, 1.0]), jnp.zeros(1), jnp.zeros(1), jnp.zeros(0), 1.0,
+                1e-3,
+            ),
+            ValueError,
+            "num has 1 non-finite",
+        )
+    ]
+    return ModelCase(m, 1e-3 * _prbs(200), 1e-3, lambda m: (m.num, m.log_omega), errors)
+
+
+def _designed_sensor():
+    from jaxvs.studies.design import DesignedSensor, LagCore
+
+    m = DesignedSensor(
+        inputs=("a", "b"),
+        target="y",
+        columns=((0, 0), (0, 2), (1, 0), (1, -1)),  # a(k), a(k - 2), b(k), b(k)²
+        structure="lag",
+        dt=1.0,
+        u_offset=jnp.array([0.5, -0.2]),
+        u_scale=jnp.array([2.0, 1.5]),
+        y_offset=jnp.asarray(20.0),
+        y_scale=jnp.asarray(3.0),
+        core=LagCore(jnp.asarray(0.8), jnp.array([0.5, -0.2, 0.3, 0.1]), jnp.asarray(0.1)),
+    )
+    u = jnp.asarray(np.random.default_rng(4).normal(size=(120, 2)))
+    errors = [(lambda: m.predict(u, 2.0), ValueError, "designed at 1.0 s")]
+    return ModelCase(m, u, 1.0, lambda m: (m.core.a, m.core.w), errors)
+
+
 # Every concrete jaxvs.models.AbstractModel, as (name, factory) pairs; a new model class is
 # added here and gets the jit / vmap / gradient / recovery / error tests of
 # tests/test_models_registry.py (which fails while a model class is missing).
@@ -156,4 +206,7 @@ MODELS = [
     ("time_delay_network", lambda: _network(jaxvs.models.TimeDelayNetwork)),
     ("virtual_sensor", _virtual_sensor),
     ("drive_axis", _drive_axis),
+    ("oscillator_chain", _oscillator_chain),
+    ("stable_tmf", _stable_tmf),
+    ("designed_sensor", _designed_sensor),
 ]

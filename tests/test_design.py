@@ -11,8 +11,9 @@ import scipy.signal as ss
 
 import jaxvs
 from jaxvs._cli import main
+from jaxvs.signal import block_bootstrap_means
 from jaxvs.studies.design import DesignDataWarning, DesignedSensor
-from jaxvs.studies.design._score import bootstrap_mse, rank_designs
+from jaxvs.studies.design._score import rank_designs
 from jaxvs.studies.design._search import (
     Candidate,
     feature_mask,
@@ -117,7 +118,7 @@ def test_batched_network_training_equals_loop():
 def test_block_bootstrap_iid_matches_closed_form():
     rng = np.random.default_rng(4)
     e2 = rng.normal(size=(1, 4000)) ** 2
-    reps = bootstrap_mse(e2, block=1, reps=2000, seed=0)
+    reps = block_bootstrap_means(e2, 1, 2000, np.random.default_rng(0))
     # iid resampling of n values: sd of the mean = sd(e²)/√n; 2000 replicates: ~3 % error
     assert abs(reps.std() / (e2.std() / np.sqrt(4000)) - 1) < 0.1
 
@@ -163,7 +164,9 @@ def test_design_recovers_inputs_and_round_trips(spindle, tmp_path):
     assert c["baseline"]["validation"]["rmse"] > best["validation"]["rmse"]
     assert [d["rank"] for d in c["designs"]] == list(range(1, len(c["designs"]) + 1))
     assert "T_near" not in c["forward_selection"]["selected"]
-    out = rep.save(tmp_path / "rep")
+    from jaxvs.plotting import plot_design
+
+    out = rep.save(tmp_path / "rep", figures=plot_design)
     assert json.loads((out / "report.json").read_text())["best"]["rank"] == 1
     for f in ("report.md", "report.html", "best.eqx", "heldout_prediction.png"):
         assert (out / f).exists()

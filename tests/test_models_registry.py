@@ -18,17 +18,21 @@ CASES = [pytest.param(factory, id=name) for name, factory in MODELS]
 
 
 def _concrete_models():
-    out = set()
-    for name in dir(jaxvs.models):
-        obj = getattr(jaxvs.models, name)
-        if (
-            inspect.isclass(obj)
-            and issubclass(obj, jaxvs.models.AbstractModel)
-            and not inspect.isabstract(obj)
-            and not name.startswith("Abstract")
-        ):
-            out.add(obj)
-    return out
+    # every concrete AbstractModel of the package, wherever it lives (models, studies, ...)
+    import jaxvs.studies  # noqa: F401
+
+    def subclasses(cls):
+        for sub in cls.__subclasses__():
+            yield sub
+            yield from subclasses(sub)
+
+    return {
+        cls
+        for cls in subclasses(jaxvs.models.AbstractModel)
+        if cls.__module__.startswith("jaxvs.")
+        and not inspect.isabstract(cls)
+        and not cls.__name__.startswith(("Abstract", "_"))
+    }
 
 
 def test_registry_holds_every_model():

@@ -731,3 +731,19 @@ def test_welch_options_object_equals_keywords():
         frf_h2(x, y, 1000.0, welch=opts, nperseg=128)
     with pytest.raises(TypeError, match="unknown option.*nperseq"):
         frf_h2(x, y, 1000.0, nperseq=128)
+
+
+def test_transmissibility_takes_the_welch_options_object():
+    # the same estimate from welch=Welch(...) and from its fields as keywords
+    from jaxvs.signal import Welch, transmissibility
+
+    rng = np.random.default_rng(1)
+    xe = rng.normal(size=4096)
+    xt = np.convolve(xe, [0.8, 0.3, 0.1])[:4096] + 0.05 * rng.normal(size=4096)
+    a = transmissibility(xt, xe, 1000.0, nperseg=512, window="hamming")
+    b = transmissibility(xt, xe, 1000.0, welch=Welch(nperseg=512, window="hamming"))
+    np.testing.assert_array_equal(np.asarray(a.H), np.asarray(b.H))  # same arithmetic
+    with pytest.raises(TypeError, match="not both"):
+        transmissibility(xt, xe, 1000.0, welch=Welch(nperseg=512), nperseg=256)
+    with pytest.raises(TypeError, match=r"unknown option.*npersg.*the Welch options"):
+        transmissibility(xt, xe, 1000.0, npersg=512)

@@ -73,6 +73,14 @@ def test_fig4_and_modal_route_on_exact_frfs():
     band = (2 * np.pi * 10.0, 2 * np.pi * 600.0)
     r_e = tmf_from_impacts(w, H(3, ENCODER), H(ENCODER, ENCODER), n_modes=4, band=band)
     assert _err(r_e.model, y) < 0.005
+    # the options object is the same identification as its fields given as keywords
+    fit = jaxvs.studies.TMFFit(n_modes=4)
+    r_o = tmf_from_impacts(w, H(3, ENCODER), H(ENCODER, ENCODER), band=band, options=fit)
+    np.testing.assert_array_equal(np.asarray(r_o.model.num), np.asarray(r_e.model.num))
+    with pytest.raises(TypeError, match="TMFFit options either as options=TMFFit"):
+        tmf_from_impacts(w, H(3, ENCODER), H(ENCODER, ENCODER), options=fit, n_modes=3)
+    with pytest.raises(TypeError, match=r"unknown option.*n_mode\b.*the TMFFit options"):
+        tmf_from_impacts(w, H(3, ENCODER), H(ENCODER, ENCODER), n_mode=4)
     # Fig. 4: T^D = T^E (the chain's closed forms), T^T different
     T_D = np.asarray(ch.tmf(jnp.asarray(W_BAND), 3, ENCODER, DRIVE))[0]
     T_T = np.asarray(ch.tmf(jnp.asarray(W_BAND), 3, ENCODER, 3))[0]

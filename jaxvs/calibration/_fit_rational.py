@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from .._misc import concrete, require_x64
+from .._misc import check_finite, concrete, require_x64
 from ..models import RationalTF
 from . import _lm, _sk
 from ._lm import batched_while
@@ -149,16 +149,6 @@ def _as_order(order) -> tuple[int, int]:
             "denominator order); jaxvs models are proper. Use nb <= na (a TMF has nb == na)."
         )
     return nb, na
-
-
-def _check_finite(x, value: np.ndarray | None, what: str, fix: str):
-    """NaN/inf: a ValueError on concrete input, `eqx.error_if` under `jit`."""
-    msg = f"fit_rational: {what} contains NaN or inf. {fix}"
-    if value is not None:
-        if not np.all(np.isfinite(value)):
-            raise ValueError(msg)
-        return x
-    return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), msg)
 
 
 @functools.partial(jax.jit, static_argnames=("nb", "na"))
@@ -496,13 +486,15 @@ def fit_rational(
         )
     batch = H.shape[:-1]
     size = math.prod(batch)
-    omega = _check_finite(omega, omega_c, "omega", "Remove those frequency points.")
+    omega = check_finite(omega, "fit_rational: omega", "Remove those frequency points.")
     if omega_c is not None and (np.any(omega_c < 0) or not np.any(omega_c > 0)):
         raise ValueError(
             "fit_rational: omega must be >= 0 with at least one positive value [rad/s]; "
             "the response at -w is the complex conjugate of the one at w."
         )
-    H = _check_finite(H, H_c, "H", "Drop those frequency points (or give them zero weight).")
+    H = check_finite(
+        H, "fit_rational: H", "Drop those frequency points (or give them zero weight)."
+    )
     if H_c is not None and not np.any(H_c):
         raise ValueError(
             "fit_rational: H is zero at every frequency, so there is nothing to fit (every "
@@ -526,7 +518,7 @@ def fit_rational(
                 f"fit_rational: weights of shape {w.shape} do not broadcast to H's shape "
                 f"{H.shape}; give (freq,) or (*batch, freq)."
             )
-        w = _check_finite(w, w_c, "weights", "Use 0 to drop a point.")
+        w = check_finite(w, "fit_rational: weights", "Use 0 to drop a point.")
         if w_c is not None and np.any(w_c < 0):
             raise ValueError("fit_rational: weights must be non-negative (0 drops a point).")
         if w_c is not None and not np.any(w_c):

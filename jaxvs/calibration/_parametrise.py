@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
-from .._misc import as_real, concrete
+from .._misc import as_real, concrete, polymul
 from ..models import pole_sections
 
 __all__ = [
@@ -262,19 +262,10 @@ class StableDenominator(AbstractParameter):
         # of batched convolutions; "highest power first" as in scipy.
         for k in range(w.shape[-1]):
             sec = jnp.stack([one[..., 0], 2 * z[..., k] * w[..., k], w[..., k] ** 2], -1)
-            poly = _polymul(poly, sec)
+            poly = polymul(poly, sec)
         if self.log_pole.shape[-1] == 1:
-            poly = _polymul(poly, jnp.concatenate([one, jnp.exp(self.log_pole)], -1))
+            poly = polymul(poly, jnp.concatenate([one, jnp.exp(self.log_pole)], -1))
         return jax.lax.stop_gradient(self.lead)[..., None] * poly
-
-
-def _polymul(a: Array, b: Array) -> Array:
-    """Product of polynomials along the last axis (batched `jnp.polymul`)."""
-    n, m = a.shape[-1], b.shape[-1]
-    out = jnp.zeros(jnp.broadcast_shapes(a.shape[:-1], b.shape[:-1]) + (n + m - 1,), a.dtype)
-    for j in range(m):
-        out = out.at[..., j : j + n].add(a * b[..., j : j + 1])
-    return out
 
 
 def stable_denominator(den: ArrayLike) -> StableDenominator:

@@ -15,11 +15,9 @@ see the documentation's "Scale-out" page for a worked example).
 
 from __future__ import annotations
 
-import concurrent.futures
 import dataclasses
 import functools
 import math
-import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Unpack
 
@@ -30,6 +28,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from jaxtyping import Array, ArrayLike, PyTree
 
+from .._misc import timed_call
 from .._progress import Progress
 from ..models import AbstractLinearModel, simulate
 from ._calibrate import (
@@ -178,125 +177,6 @@ def _gather(x: Any) -> np.ndarray:
 
         return np.asarray(multihost_utils.process_allgather(x, tiled=True))
     return np.asarray(x)
-
-
-# ----------------------------------------------------------------------------- compile
-
-_COMPILED: dict = {}
-_COMPILED_SIZE = 64
-
-
-def _local(x: Any, device: Any) -> Any:
-    """The block of a global array that lives on `device` (or the whole local value)."""
-    if isinstance(x, jax.Array) and len(x.sharding.device_set) > 1:
-        return next(s.data for s in x.addressable_shards if s.device == device)
-    return jax.device_put(x, device)
-
-
-def _lapack(executable: Any) -> bool:
-    try:
-        return "lapack" in executable.as_text()
-    except Exception:  # pragma: no cover - no HLO text: assume the worst
-        return True
-
-
-def timed_call(fn: Callable, *args: Any, mesh: Mesh | None = None) -> tuple[Any, float, float]:
-    """Run `fn(*args)` compiled; with a `mesh`, once per device on that device's block.
-
-    The array arguments are global arrays laid over `mesh` along axis 0 (or replicated);
-    every device of this process runs the compiled `fn` on its own block, asynchronously,
-    and the outputs (members axis first) are assembled into global arrays sharded the same
-    way. No collective operation is involved, so no device waits for another, and each
-    member is computed exactly as on one device. (`jax.shard_map` and XLA's SPMD
-    partitioner are the usual tools; the first conflicts with lineax's structure checks
-    inside the solvers, the second inserts an all-reduce into the vmapped solver's loop
-    condition, which can stall on small CPU hosts.)
-
-    Compiled executables are cached by function, static arguments, shapes and device.
-
-    **Returns:**
-
-    `(output, compile_time, run_time)` in seconds.
-    """
-    dynamic, static = eqx.partition(args, eqx.is_array)
-    dyn_leaves, dyn_def = jax.tree_util.tree_flatten(dynamic)
-    st_leaves, st_def = jax.tree_util.tree_flatten(static)
-    if mesh is None:
-        devices = [None]
-    else:
-        devices = [d for d in mesh.devices.flat if d.process_index == jax.process_index()]
-    per_device = []
-    for d in devices:
-        per_device.append(dyn_leaves if d is None else [_local(x, d) for x in dyn_leaves])
-    avals = tuple(
-        (x.shape, str(x.dtype), bool(getattr(x, "weak_type", False))) for x in per_device[0]
-    )
-    out_static: list[Any] = []
-
-    def run(dyn):
-        out = fn(*eqx.combine(dyn, static))
-        out_dyn, out_st = eqx.partition(out, eqx.is_array)
-        out_static.append(out_st)
-        return out_dyn
-
-    keys = []
-    for d in devices:
-        key: Any = (fn, dyn_def, st_def, tuple(st_leaves), avals, d)
-        try:
-            hash(key)
-        except TypeError:
-            key = None
-        keys.append(key)
-    missing = [i for i, k in enumerate(keys) if k is None or k not in _COMPILED]
-    t0 = time.perf_counter()
-    fresh: dict[int, Any] = {}
-    if missing:
-        jitted = jax.jit(run)
-        lowered = {
-            i: jitted.lower(jax.tree_util.tree_unflatten(dyn_def, per_device[i])) for i in missing
-        }
-        # XLA compiles one executable per device; the compilations run in threads (XLA
-        # releases the GIL), which halves the wait on a 2-core host with several devices.
-        with concurrent.futures.ThreadPoolExecutor(max_workers=min(len(missing), 8)) as pool:
-            compiled = dict(zip(missing, pool.map(lambda i: lowered[i].compile(), missing)))
-        for i in missing:
-            d = devices[i]
-            serial = d is not None and d.platform == "cpu" and _lapack(compiled[i])
-            fresh[i] = (compiled[i], out_static[0], serial)
-            if keys[i] is not None:
-                _COMPILED[keys[i]] = fresh[i]
-        while len(_COMPILED) > _COMPILED_SIZE:
-            _COMPILED.pop(next(iter(_COMPILED)))
-    compile_time = time.perf_counter() - t0
-    executables = [fresh[i] if i in fresh else _COMPILED[k] for i, k in enumerate(keys)]
-    t1 = time.perf_counter()
-    outs = []
-    for (exe, _, serial), leaves in zip(executables, per_device):
-        outs.append(exe(jax.tree_util.tree_unflatten(dyn_def, leaves)))
-        if serial:
-            # heuristic: XLA's CPU runtime can stall when programs with LAPACK calls
-            # (the solvers' QR / SVD) run on two host devices at once on a small machine;
-            # such blocks run one after another (GPUs and other hosts run concurrently).
-            jax.block_until_ready(outs[-1])
-    outs = jax.block_until_ready(outs)
-    run_time = time.perf_counter() - t1
-    out_st = executables[0][1]
-    if mesh is None:
-        return eqx.combine(outs[0], out_st), compile_time, run_time
-    axis = mesh.axis_names[0]
-    sharding = NamedSharding(mesh, P(axis))
-    flat = [jax.tree_util.tree_flatten(o) for o in outs]
-    treedef = flat[0][1]
-    assembled = []
-    for i, x in enumerate(flat[0][0]):
-        blocks = [f[0][i] for f in flat]
-        shape = (x.shape[0] * mesh.devices.size,) + x.shape[1:]
-        assembled.append(jax.make_array_from_single_device_arrays(shape, sharding, blocks))
-    return (
-        eqx.combine(jax.tree_util.tree_unflatten(treedef, assembled), out_st),
-        compile_time,
-        run_time,
-    )
 
 
 # ----------------------------------------------------------------------------- simulate

@@ -27,8 +27,17 @@ from ._loaders import (
     save_mat as save_mat,
     save_npz as save_npz,
 )
+from ._mapping import (
+    load_renamed as load_renamed,
+    rename_signals as rename_signals,
+    require_signals as require_signals,
+)
 from ._quality import signal_quality as signal_quality
-from ._record import DEFAULT_TIME_RTOL as DEFAULT_TIME_RTOL, Record as Record
+from ._record import (
+    DEFAULT_TIME_RTOL as DEFAULT_TIME_RTOL,
+    Record as Record,
+    si_record as si_record,
+)
 from ._sinumerik import (
     SINUMERIK_ALPHABET as SINUMERIK_ALPHABET,
     decode_sinumerik_base85 as decode_sinumerik_base85,
@@ -58,7 +67,6 @@ from ._units import (
     convert_units as convert_units,
     parse_header as parse_header,
     parse_unit as parse_unit,
-    si_record as si_record,
     si_unit as si_unit,
     to_si as to_si,
 )

@@ -11,6 +11,8 @@ from typing import Any
 import numpy as np
 from jaxtyping import Float
 
+from ._units import ORIGINAL_UNITS_KEY, convert_units, parse_unit, to_si
+
 # Heuristic: a measured time vector is accepted as uniform when every sample lies within
 # 1e-3·dt of the grid t0 + k·dt. Real data-acquisition clocks (EMPS: 3e-5·dt) are far
 # inside this; anything outside would shift samples by a visible fraction of a step.
@@ -604,8 +606,6 @@ class Record:
         `KeyError` for a missing signal; `ValueError` naming the signal and both units when
         they measure different quantities or a unit is unknown.
         """
-        from ._units import ORIGINAL_UNITS_KEY, convert_units, parse_unit
-
         self._require([name])
         if not isinstance(unit, str):
             raise TypeError(f"unit must be a string such as 'm', got {unit!r}.")
@@ -653,3 +653,29 @@ def _unpickle(
     metadata: dict[str, Any],
 ) -> Record:
     return Record(signals, dt=dt, t0=t0, units=units, metadata=metadata)
+
+
+def si_record(record: Record, source: str = "") -> Record:
+    """`record` with every signal that has a unit converted to SI (see the module doc).
+
+    Converted signals' former units are added to `metadata["original_units"]`; a record
+    that is already in SI is returned unchanged.
+    """
+    original = dict(record.metadata.get(ORIGINAL_UNITS_KEY) or {})
+    units = record.units
+    data = {}
+    changed = False
+    for name in record.names:
+        values = record[name]
+        unit = units.get(name)
+        if unit:
+            converted, si = to_si(values, unit, name=name, source=source)
+            if si != unit:
+                original.setdefault(name, unit)
+                values, changed = converted, True
+            units[name] = si
+        data[name] = values
+    if not changed:
+        return record
+    metadata = {**record.metadata, ORIGINAL_UNITS_KEY: original}
+    return Record(data, dt=record.dt, t0=record.t0, units=units, metadata=metadata)

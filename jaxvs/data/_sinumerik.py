@@ -49,9 +49,8 @@ from typing import Any
 import numpy as np
 
 from ._frf import FRFData
-from ._loaders import existing_file
-from ._record import DEFAULT_TIME_RTOL, Record
-from ._units import si_record
+from ._paths import existing_file
+from ._record import DEFAULT_TIME_RTOL, Record, si_record
 
 __all__ = [
     "decode_sinumerik_base85",

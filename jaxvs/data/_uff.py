@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from ._frf import FRFData
-from ._loaders import existing_file
+from ._paths import existing_file
 from ._record import Record
 from ._units import ORIGINAL_UNITS_KEY, to_si
 

@@ -311,31 +311,3 @@ def _reads_as_unit(text: str) -> bool:
     except ValueError:
         return False
     return unit is not None
-
-
-def si_record(record: Any, source: str = "") -> Any:
-    """`record` with every signal that has a unit converted to SI (see the module doc).
-
-    Converted signals' former units are added to `metadata["original_units"]`; a record
-    that is already in SI is returned unchanged.
-    """
-    from ._record import Record
-
-    original = dict(record.metadata.get(ORIGINAL_UNITS_KEY) or {})
-    units = record.units
-    data = {}
-    changed = False
-    for name in record.names:
-        values = record[name]
-        unit = units.get(name)
-        if unit:
-            converted, si = to_si(values, unit, name=name, source=source)
-            if si != unit:
-                original.setdefault(name, unit)
-                values, changed = converted, True
-            units[name] = si
-        data[name] = values
-    if not changed:
-        return record
-    metadata = {**record.metadata, ORIGINAL_UNITS_KEY: original}
-    return Record(data, dt=record.dt, t0=record.t0, units=units, metadata=metadata)

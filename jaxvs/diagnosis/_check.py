@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import math
 import pathlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -265,13 +265,17 @@ def _jacobian_report(
     return out
 
 
-def check(data: Any, *, family: str, **options: Any) -> CheckReport:
+def check(
+    data: Any, *, family: str, signals: Mapping[str, str] | None = None, **options: Any
+) -> CheckReport:
     """Data-quality and identifiability check of records for a family's nominal model.
 
     **Arguments:**
 
     - `data`: a `Record`, a path, or a list of them (several experiments).
     - `family`: `"drive"`, `"tmf"` or `"thermal"`.
+    - `signals`: the user's own column names mapped onto the canonical ones,
+      `{"q": "Position", "u": "Torque", "t": "Time"}` (`jaxvs.data.rename_signals`).
     - `options`: family options as for `jaxvs.diagnose` (e.g. `cutoff_hz`, `order`).
 
     **Returns:**
@@ -290,7 +294,7 @@ def check(data: Any, *, family: str, **options: Any) -> CheckReport:
     require_x64("check", "the nominal model's calibration and its Jacobian")
     if family not in FAMILIES:
         raise ValueError(f"check: unknown family {family!r}; choose one of {sorted(FAMILIES)}.")
-    recs = _records(data, "calibration")
+    recs = _records(data, "calibration", signals)
     fam = FAMILIES[family](**options)
     _check_signals(fam, recs)
     return check_records(fam, recs)

@@ -6,12 +6,13 @@ import math
 import pathlib
 import sys
 import time
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from .._misc import require_x64
-from ..data import Record, load, split_blocks
+from ..data import Record, load_renamed, rename_signals, require_signals, split_blocks
 from ._base import AbstractFamily, NotIdentifiable
 from ._drive import DriveFamily
 from ._engine import search
@@ -28,7 +29,7 @@ FAMILIES["thermal"] = ThermalFamily
 FAMILIES["tmf"] = TMFFamily
 
 
-def _records(data: Any, role: str) -> list[tuple[Record, str]]:
+def _records(data: Any, role: str, signals: Any = None) -> list[tuple[Record, str]]:
     if data is None:
         return []
     items = list(data) if isinstance(data, list | tuple) else [data]
@@ -38,9 +39,10 @@ def _records(data: Any, role: str) -> list[tuple[Record, str]]:
     for i, item in enumerate(items):
         if isinstance(item, Record):
             name = str(item.metadata.get("name") or item.metadata.get("file") or f"{role} {i + 1}")
+            item = rename_signals(item, signals) if signals else item
             out.append((item, pathlib.Path(name).name))
         elif isinstance(item, str | pathlib.Path):
-            loaded = load(item)
+            loaded = load_renamed(item, signals)
             # A file with several time bases or runs (Sinumerik, TwinCAT, TDMS, MDF) gives
             # one experiment per record.
             recs = loaded if isinstance(loaded, list) else [loaded]
@@ -57,14 +59,8 @@ def _records(data: Any, role: str) -> list[tuple[Record, str]]:
 
 def _check_signals(fam: AbstractFamily, recs: list[tuple[Record, str]]) -> None:
     for rec, name in recs:
-        missing = [s for s in fam.required if s not in rec.names]
-        if missing:
-            raise ValueError(
-                f"diagnose(family={fam.name!r}): experiment {name!r} lacks the required "
-                f"signal(s) {missing}; it has {list(rec.names)}. Rename the columns to the "
-                f"canonical names {list(fam.required)} (optional: {list(fam.optional)}), e.g. "
-                "with Record.rename."
-            )
+        where = f"diagnose(family={fam.name!r})"
+        require_signals(rec, fam.required, where=where, name=name, optional=fam.optional)
 
 
 def _check_int(name: str, value: Any, minimum: int) -> None:
@@ -128,6 +124,7 @@ def diagnose(
     n_null: int = 19,
     seed: int = 0,
     progress: bool = False,
+    signals: Mapping[str, str] | None = None,
     **options: Any,
 ) -> DiagnosisReport:
     """Diagnose the sim-to-real gap of a family's nominal model on measured experiments.
@@ -165,6 +162,8 @@ def diagnose(
         percentile is then about the largest of them).
     - `seed`: seed of the bootstrap and the gap-map permutations.
     - `progress`: print progress to stderr.
+    - `signals`: the user's own column names mapped onto the canonical ones,
+        `{"q": "Position", "u": "Torque", "t": "Time"}` (`jaxvs.data.rename_signals`).
     - `**options`: family options (drive: `cutoff_hz`, `decimation`,
       `friction_sharpness`, `zoh_force`, `mass` (the moving mass used when the record does
       not excite the inertia); tmf: `order`; thermal: see the family).
@@ -195,8 +194,8 @@ def diagnose(
             print(f"[jaxvs diagnose {time.perf_counter() - t_start:6.1f} s] {msg}", file=sys.stderr)
 
     fam = FAMILIES[family](**options)
-    cal_recs = _records(calibration, "calibration")
-    val_recs = _records(validation, "validation")
+    cal_recs = _records(calibration, "calibration", signals)
+    val_recs = _records(validation, "validation", signals)
     _check_signals(fam, cal_recs + val_recs)
     _check_sampling(cal_recs + val_recs)
     if not val_recs:

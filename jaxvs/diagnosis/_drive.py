@@ -51,6 +51,7 @@ import scipy.signal as ss
 from jaxtyping import Array, Float
 
 from .. import models
+from .._misc import legendre
 from ..calibration import bounded, fixed, positive, unwrap
 from ..data import Record
 from ._base import (
@@ -463,15 +464,6 @@ class TimeDelay(AbstractEffect):
         return {"tau": _f(self.tau)}
 
 
-def _legendre(x: Array, degree: int) -> Array:
-    cols = [x]
-    p0, p1 = jnp.ones_like(x), x
-    for k in range(1, degree):
-        p0, p1 = p1, ((2 * k + 1) * x * p1 - k * p0) / (k + 1)
-        cols.append(p1)
-    return jnp.stack(cols, axis=-1)
-
-
 class PositionForceEffect(AbstractAdditiveEffect):
     """`Σ c_k P_k(q̄) + Σ_h A_h·sin(2πhq/p) + B_h·cos(2πhq/p)`, `h = 1, 2`: a smooth
     force over the travel (Legendre terms: gravity, a spring) plus a ripple of pitch `p`
@@ -493,7 +485,7 @@ class PositionForceEffect(AbstractAdditiveEffect):
         x = jnp.clip((q - self.centre) / self.half_range, -1.0, 1.0)
         ph = 2 * jnp.pi * q / self.pitch
         ripple = [jnp.sin(ph), jnp.cos(ph), jnp.sin(2 * ph), jnp.cos(2 * ph)]
-        basis = jnp.concatenate([_legendre(x, 3), jnp.stack(ripple, -1)], axis=-1)
+        basis = jnp.concatenate([legendre(x, 3), jnp.stack(ripple, -1)], axis=-1)
         return basis @ self.size
 
     def constrained(self):

@@ -16,6 +16,8 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.signal as ss
 
+from ..signal import block_bootstrap_indices, block_length, integrated_time
+
 __all__ = [
     "benjamini_hochberg",
     "bic",
@@ -34,38 +36,6 @@ def nrmse(residual: np.ndarray, target: np.ndarray) -> float:
     if den == 0.0:
         return float("inf")
     return float(np.sqrt(np.mean(np.square(residual))) / den)
-
-
-def block_length(residual: np.ndarray, *, minimum: int = 8, maximum: int | None = None) -> int:
-    """Block length for a moving-block bootstrap of an autocorrelated series.
-
-    The integrated autocorrelation time `τ = 1 + 2 Σ ρ_k` (summed up to the first
-    non-positive autocorrelation, Geyer's initial positive sequence) sets the block:
-    `L = max(minimum, ⌈2τ⌉, ⌈N^{1/3}⌉)`, capped at `N/10` so that at least ten blocks
-    exist. Blocks several correlation times long keep the dependence inside a block.
-    """
-    n = np.size(residual)
-    tau = integrated_time(residual)
-    if tau is None:
-        return max(1, min(minimum, n))
-    cap = max(1, n // 10) if maximum is None else maximum
-    return int(min(cap, max(minimum, math.ceil(2.0 * tau), math.ceil(n ** (1.0 / 3.0)))))
-
-
-def block_bootstrap_indices(
-    n: int, length: int, n_boot: int, rng: np.random.Generator
-) -> np.ndarray:
-    """Indices of `n_boot` moving-block bootstrap resamples of a series of `n` samples.
-
-    Each resample concatenates `⌈n/length⌉` blocks of `length` consecutive samples with
-    uniformly drawn starts (circular, so every sample is equally likely), cut to `n`.
-    Returns an int array `(n_boot, n)`.
-    """
-    length = max(1, min(int(length), n))
-    n_blocks = -(-n // length)
-    starts = rng.integers(0, n, size=(n_boot, n_blocks))
-    idx = (starts[:, :, None] + np.arange(length)[None, None, :]) % n
-    return idx.reshape(n_boot, -1)[:, :n]
 
 
 def gap_change_interval(
@@ -197,24 +167,6 @@ def effective_samples(residual: np.ndarray) -> float:
     if tau is None:
         return float(max(n, 1))
     return float(n / max(1.0, tau))
-
-
-def integrated_time(residual: np.ndarray) -> float | None:
-    """The integrated autocorrelation time `τ = 1 + 2 Σ ρ_k` of a series [samples],
-    summed up to the first non-positive autocorrelation (Geyer's initial positive
-    sequence); `None` for fewer than 4 samples or a constant series."""
-    e = np.asarray(residual, dtype=float)
-    e = e - e.mean()
-    n = e.size
-    if n < 4 or not np.any(e):
-        return None
-    nfft = 1 << int(math.ceil(math.log2(2 * n)))
-    f = np.fft.rfft(e, nfft)
-    acf = np.fft.irfft(f * np.conj(f), nfft)[:n]
-    acf = acf / acf[0]
-    nonpos = np.nonzero(acf[1:] <= 0.0)[0]
-    k = int(nonpos[0]) + 1 if nonpos.size else n
-    return 1.0 + 2.0 * float(np.sum(acf[1:k]))
 
 
 def bic_effective(ssr: float, n: int, p: int, n_eff: float) -> float:

@@ -21,6 +21,7 @@ from ._nonlinear_simulate import (
     solve_sampled as solve_sampled,
     zoh_interval as zoh_interval,
 )
+from ._realisation import ModalRealisation as ModalRealisation
 from ._simulate import (
     SimulationMetrics as SimulationMetrics,
     simulate as simulate,
@@ -67,7 +68,6 @@ from .lti import (
     DampedModes as DampedModes,
     GridFamily as GridFamily,
     ModalModel as ModalModel,
-    ModalRealisation as ModalRealisation,
     NormalModes as NormalModes,
     OscillatorChain as OscillatorChain,
     RationalTF as RationalTF,

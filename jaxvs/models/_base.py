@@ -24,9 +24,10 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from .._misc import check_finite, concrete
+from ._realisation import ModalRealisation
 
 if TYPE_CHECKING:
-    from .lti import ModalRealisation, StateSpace
+    from .lti import StateSpace
 
 
 PARAMETER_FIX = (
@@ -108,7 +109,7 @@ class AbstractLinearModel(AbstractModel):
         """Transfer matrix `G(s)` of one (unbatched) system at complex frequencies `s`."""
 
     @abc.abstractmethod
-    def modal_realisation(self) -> "ModalRealisation":
+    def modal_realisation(self) -> ModalRealisation:
         """A well-conditioned real block-diagonal realisation of one (unbatched) system."""
 
     def to_state_space(self) -> "StateSpace":
@@ -117,7 +118,10 @@ class AbstractLinearModel(AbstractModel):
         The realisation is the real block-diagonal (modal) one, which keeps its digits
         at order 8-12 where companion forms do not.
         """
-        return map_batch(lambda m: m.modal_realisation().to_state_space(), self)
+        # The state-space model is built on this interface, so it is looked up at call time.
+        from .lti import StateSpace
+
+        return map_batch(lambda m: StateSpace(*m.modal_realisation().dense()), self)
 
     @property
     def is_siso(self) -> bool:

@@ -22,7 +22,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from ._base import AbstractLinearModel, map_batch
-from .lti import ModalRealisation
+from ._realisation import ModalRealisation
 
 METHODS: tuple[str, ...] = ("zoh", "tustin", "euler", "heun")
 Method = Literal["zoh", "tustin", "euler", "heun"]

@@ -42,7 +42,7 @@ from ._discretise import (
     _check_method,
     discretise_realisation,
 )
-from .lti._realisation import ModalRealisation, from_dense
+from ._realisation import ModalRealisation, from_dense
 
 # Engine parameters (heuristics tuned on a 2-core x86 CPU, see benchmarks/simulate.py).
 _K = 16  # samples per block (Toeplitz size)

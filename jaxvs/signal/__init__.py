@@ -1,10 +1,17 @@
-"""Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows."""
+"""Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows,
+filtering, resampling, the moving-block bootstrap of autocorrelated series."""
 
 from ._basis import (
     bspline_basis as bspline_basis,
     difference_penalty as difference_penalty,
     quantile_knots as quantile_knots,
     rbf_basis as rbf_basis,
+)
+from ._bootstrap import (
+    block_bootstrap_indices as block_bootstrap_indices,
+    block_bootstrap_means as block_bootstrap_means,
+    block_length as block_length,
+    integrated_time as integrated_time,
 )
 from ._cwt import (
     CWTDamping as CWTDamping,

@@ -14,6 +14,8 @@ import numpy as np
 import scipy.interpolate as si
 from jaxtyping import ArrayLike, Float
 
+from .._misc import check_finite
+
 _METHODS = ("linear", "cubic", "previous")
 # Heuristic: grid points within 1e-9·dt of the last sample are kept (round-off in
 # t0 + k·dt must not drop the final sample of an already uniform record).
@@ -36,15 +38,11 @@ def _time_vector(t) -> np.ndarray:
 
 
 def _check_finite(values: np.ndarray, name: str) -> None:
-    bad = ~np.isfinite(values)
-    if bad.any():
-        index = np.unravel_index(int(np.argmax(bad)), bad.shape)
-        where = int(index[0]) if values.ndim == 1 else tuple(int(i) for i in index)
-        raise ValueError(
-            f"resample: {name} has {int(bad.sum())} NaN/inf value(s), the first at index "
-            f"{where}. Drop those samples (e.g. keep = np.isfinite(x); resample(t[keep], "
-            "x[keep])) so that they are interpolated over."
-        )
+    fix = (
+        "Drop those samples (e.g. keep = np.isfinite(x); resample(t[keep], x[keep])) so that "
+        "they are interpolated over."
+    )
+    check_finite(values, f"resample: {name}", fix)
 
 
 def _uniform_grid(time: np.ndarray, dt) -> np.ndarray:

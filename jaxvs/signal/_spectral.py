@@ -22,7 +22,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from .._custom_types import RealScalarLike
-from .._misc import check_finite, is_traced
+from .._misc import check_finite, is_traced, options_object
 from ..data import FRFData
 from ._windows import _ALIASES, _check_fs, get_window
 
@@ -545,14 +545,15 @@ class _RatioInputs(NamedTuple):
     detrend: str
 
 
-def _ratio_inputs(
-    fn: str, x, y, fs, window, nperseg, noverlap, nfft, df, detrend, records_axis, names
-) -> _RatioInputs:
+def _ratio_inputs(fn: str, x, y, fs, welch: "Welch", names) -> _RatioInputs:
     """Validate the records and options of a ratio estimator (H1, H2, Hv, coherence)."""
-    detrend_kind = _detrend_kind(detrend, fn)
-    wx, wy = _split_window(window, True, fn)
+    w = welch
+    detrend_kind = _detrend_kind(w.detrend, fn)
+    wx, wy = _split_window(w.window, True, fn)
     fs, x, y, batch = _prepare_pair(x, y, fs, fn, names=names)
-    seg = _segments(fn, x.shape[-1], batch, fs, (wx, wy), nperseg, noverlap, nfft, df, records_axis)
+    seg = _segments(
+        fn, x.shape[-1], batch, fs, (wx, wy), w.nperseg, w.noverlap, w.nfft, w.df, w.records_axis
+    )
     x = _check_finite(x, names[0], fn)
     y = _check_finite(y, names[1], fn)
     x = _check_exciting(x, names[0], "input", seg.records_axis, fn)
@@ -616,20 +617,8 @@ def coherence(
 
     As [`csd`][], and `ValueError` when a signal is constant (no spectrum).
     """
-    r = _ratio_inputs(
-        "coherence",
-        x,
-        y,
-        fs,
-        window,
-        nperseg,
-        noverlap,
-        nfft,
-        df,
-        detrend,
-        records_axis,
-        ("x", "y"),
-    )
+    welch = Welch(window, nperseg, noverlap, nfft, df, detrend, records_axis)
+    r = _ratio_inputs("coherence", x, y, fs, welch, ("x", "y"))
     _, gamma2 = _ratio_core(r.x, r.y, r.wx, r.wy, r.seg, r.detrend, None, 0, False)
     return jnp.asarray(_frequencies(r.seg)), gamma2
 
@@ -654,26 +643,9 @@ def _n_averages(seg: _Segments) -> int:
 
 
 def _frf(
-    estimator,
-    x,
-    y,
-    fs,
-    *,
-    window,
-    nperseg,
-    noverlap,
-    nfft,
-    df,
-    detrend,
-    records_axis,
-    input_unit,
-    output_unit,
-    kind,
-    fn,
+    estimator, x, y, fs, *, welch, input_unit, output_unit, kind, fn
 ) -> FRFData:
-    r = _ratio_inputs(
-        fn, x, y, fs, window, nperseg, noverlap, nfft, df, detrend, records_axis, ("x", "y")
-    )
+    r = _ratio_inputs(fn, x, y, fs, welch, ("x", "y"))
     h, gamma2 = _ratio_core(r.x, r.y, r.wx, r.wy, r.seg, r.detrend, estimator, 0, False)
     return FRFData(
         _frequencies(r.seg),
@@ -683,7 +655,7 @@ def _frf(
         input_unit=input_unit,
         output_unit=output_unit,
         kind=kind,
-        metadata=_metadata(r.seg, estimator, detrend),
+        metadata=_metadata(r.seg, estimator, welch.detrend),
     )
 
 
@@ -727,7 +699,8 @@ the value checks are `eqx.error_if`.
 
 @dataclasses.dataclass(frozen=True)
 class Welch:
-    """Welch averaging options of the FRF estimators (`frf_h1`, `frf_h2`, `frf_hv`), as one
+    """Welch averaging options of the FRF estimators (`frf_h1`, `frf_h2`, `frf_hv`) and of
+    `transmissibility`, as one
     frozen object that can be built once and passed to several estimates.
 
     **Fields:** `window` (a name / samples shared by both channels, or a pair
@@ -760,24 +733,12 @@ def _frf_estimator(estimator: str) -> Callable[..., FRFData]:
         kind: str = "frf",
         **options: Any,
     ) -> FRFData:
-        if welch is not None and options:
-            raise TypeError(
-                f"{name}: give the Welch options either as welch=Welch(...) or as keywords "
-                f"({', '.join(options)}), not both."
-            )
-        fields = {f.name for f in dataclasses.fields(Welch)}
-        unknown = sorted(set(options) - fields)
-        if unknown:
-            raise TypeError(
-                f"{name}: unknown option(s) {unknown}; the Welch options are {sorted(fields)}."
-            )
-        w = Welch(**options) if welch is None else welch
         return _frf(
             estimator,
             x,
             y,
             fs,
-            **dataclasses.asdict(w),
+            welch=options_object(Welch, welch, options, name, "welch"),
             input_unit=input_unit,
             output_unit=output_unit,
             kind=kind,
@@ -833,13 +794,8 @@ def transmissibility(
     encoder_quantity: Literal["position", "velocity", "acceleration"] = "position",
     to_position: bool = True,
     length_unit: str = "m",
-    window="hann",
-    nperseg: int | None = None,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    df: float | None = None,
-    detrend: Detrend = "constant",
-    records_axis: int | None = None,
+    welch: Welch | None = None,
+    **options: Any,
 ) -> FRFData:
     """Transmissibility (TMF) `T_te = x_t / x_e` from two responses to the same excitation.
 
@@ -871,7 +827,8 @@ def transmissibility(
     - `to_position`: convert to the TMF between positions (default); `False` keeps the
       ratio of the measured quantities.
     - `length_unit`: unit of length for the unit labels (default `"m"`).
-    - Welch options and `records_axis`: as in [`frf_h1`][].
+    - `welch`: the Welch averaging options ([`Welch`][]), or its fields as keywords
+      (`nperseg=...`, `records_axis=...`), as in [`frf_h1`][].
 
     **Returns:**
 
@@ -890,20 +847,8 @@ def transmissibility(
             raise ValueError(
                 f"{fn}: {name} must be one of {tuple(_QUANTITY_ORDER)}, got {quantity!r}."
             )
-    r = _ratio_inputs(
-        fn,
-        x_encoder,
-        x_tool,
-        fs,
-        window,
-        nperseg,
-        noverlap,
-        nfft,
-        df,
-        detrend,
-        records_axis,
-        ("x_encoder", "x_tool"),
-    )
+    welch = options_object(Welch, welch, options, fn, "welch")
+    r = _ratio_inputs(fn, x_encoder, x_tool, fs, welch, ("x_encoder", "x_tool"))
     k_t, k_e = _QUANTITY_ORDER[tool_quantity], _QUANTITY_ORDER[encoder_quantity]
     # The tool spectrum is re-expressed in the encoder's quantity, Y' = (jω)^power · Y;
     # the factor is singular (integration) or zero (differentiation) at DC, dropped then.
@@ -928,5 +873,5 @@ def transmissibility(
         input_unit=input_unit,
         output_unit=output_unit,
         kind="transmissibility",
-        metadata=_metadata(r.seg, estimator, detrend, extra),
+        metadata=_metadata(r.seg, estimator, welch.detrend, extra),
     )

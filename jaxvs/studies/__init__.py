@@ -55,6 +55,7 @@ from .thermal import (
 )
 from .tmf import (
     ExcitationLocationWarning as ExcitationLocationWarning,
+    TMFFit as TMFFit,
     TMFIdentification as TMFIdentification,
     check_excitation_location as check_excitation_location,
     family_error as family_error,

@@ -70,7 +70,8 @@ cells = [
     ),
     md("## Report folder and the ready virtual sensor"),
     code(
-        "out = report.save('design-report')\n"
+        "from jaxvs.plotting import plot_design\n\n"
+        "out = report.save('design-report', figures=plot_design)\n"
         "print(sorted(p.name for p in out.iterdir()))\n"
         "display(Image(str(out / 'heldout_prediction.png')))\n"
         "display(Image(str(out / 'score_vs_complexity.png')))"

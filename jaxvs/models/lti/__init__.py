@@ -38,6 +38,5 @@ from ._modes import (
     normal_modes as normal_modes,
 )
 from ._rational import RationalTF as RationalTF
-from ._realisation import ModalRealisation as ModalRealisation
 from ._response import frequency_response as frequency_response
 from ._statespace import StateSpace as StateSpace

@@ -22,7 +22,8 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from ..._misc import as_real
-from .._base import check_batch, check_parameters, map_batch
+from .._base import AbstractLinearModel, check_batch, map_batch
+from .._realisation import ModalRealisation
 from ._modal import ModalModel
 from ._rational import RationalTF
 from ._statespace import StateSpace
@@ -124,7 +125,7 @@ def _apply(chain: "OscillatorChain", method: str, *args):
     return map_batch(lambda ch: getattr(ch, method)(*args), chain)
 
 
-class OscillatorChain(eqx.Module):
+class OscillatorChain(AbstractLinearModel):
     r"""Chain of `N` point masses joined by parallel spring–damper pairs.
 
     Topology (indices 0-based, `N = len(masses)`):
@@ -155,14 +156,15 @@ class OscillatorChain(eqx.Module):
     - `ground_dampings`: optional `(*batch, N)` dampers from each mass to ground
       [N·s/m], >= 0 (default 0).
 
+    As a linear model (`jaxvs.frequency_response`, `jaxvs.simulate`, `predict`) the chain
+    maps the forces on all `N` masses [N] to the displacements of all `N` masses [m]: its
+    transfer matrix is the receptance `(M s² + C s + K)⁻¹`, `(N, N)`, of order `2N`;
+    [`OscillatorChain.state_space`][] selects forces, outputs and the measured quantity.
+
     Leading `batch` axes make a family of chains (one per member); every method maps over
     them. Non-positive masses or stiffnesses and negative dampings raise at run time
     (`eqx.error_if`), also under `jit`.
     """
-
-    def __check_init__(self):
-        check_parameters(self)
-
 
     masses: Float[Array, "*batch n"]
     stiffnesses: Float[Array, "*batch spring"]
@@ -275,6 +277,29 @@ class OscillatorChain(eqx.Module):
     def batch_shape(self) -> tuple[int, ...]:
         """Leading axes of the parameters: `()` for one chain, `(n,)` for a family."""
         return self.masses.shape[:-1]
+
+    @property
+    def n_inputs(self) -> int:
+        """One force per mass (static)."""
+        return self.n_masses
+
+    @property
+    def n_outputs(self) -> int:
+        """One displacement per mass (static)."""
+        return self.n_masses
+
+    @property
+    def order(self) -> int:
+        """`2N` states: displacements and velocities (static)."""
+        return 2 * self.n_masses
+
+    def response(self, s: Complex[Array, " freq"]) -> Complex[Array, "freq out in"]:
+        """Receptance `(M s² + C s + K)⁻¹` of one chain, `(freq, N, N)` [m/N]."""
+        return self._displacements(s, np.arange(self.n_masses))
+
+    def modal_realisation(self) -> ModalRealisation:
+        every = np.arange(self.n_masses)
+        return self._state_space_one(every, every, 0).modal_realisation()
 
     def _elements(self, x: Array) -> tuple[Array, Array, Array]:
         """Split per-spring values into (ground at left, couplings (N-1,), ground at right)."""

@@ -21,9 +21,9 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float, Shaped
 
 from .._base import AbstractLinearModel, map_batch
+from .._realisation import ModalRealisation
 from ._modal import ModalModel
 from ._rational import RationalTF
-from ._realisation import ModalRealisation
 from ._statespace import StateSpace
 
 _RESIDUE_KINDS = ("complex", "real")

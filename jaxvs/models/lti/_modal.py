@@ -7,7 +7,7 @@ from jaxtyping import Array, ArrayLike, Complex, Float, Shaped
 
 from ..._misc import as_real
 from .._base import AbstractLinearModel, check_batch
-from ._realisation import ModalRealisation
+from .._realisation import ModalRealisation
 
 
 class ModalModel(AbstractLinearModel):

@@ -6,7 +6,7 @@ from jaxtyping import Array, ArrayLike, Complex, Float
 
 from ..._misc import as_real
 from .._base import AbstractLinearModel, check_batch
-from ._realisation import ModalRealisation, from_poles
+from .._realisation import ModalRealisation, from_poles
 
 
 def _frequency_scale(den: Float[Array, " n1"]) -> Array:

@@ -1,15 +1,11 @@
 """Continuous-time state-space models `x' = A x + B u`, `y = C x + D u`."""
 
-from typing import TYPE_CHECKING
-
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from ..._misc import as_real
 from .._base import AbstractLinearModel, check_batch
-
-if TYPE_CHECKING:
-    from ._realisation import ModalRealisation
+from .._realisation import ModalRealisation, from_dense
 
 
 class StateSpace(AbstractLinearModel):
@@ -74,9 +70,7 @@ class StateSpace(AbstractLinearModel):
         )
         return jnp.einsum("on,fni->foi", self.C.astype(s.dtype), X) + self.D
 
-    def modal_realisation(self) -> "ModalRealisation":
-        from ._realisation import from_dense
-
+    def modal_realisation(self) -> ModalRealisation:
         return from_dense(self.A, self.B, self.C, self.D)
 
     def to_state_space(self) -> "StateSpace":

@@ -17,8 +17,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Complex, Float
 
+from ..._misc import polymul
+from .._base import AbstractLinearModel
+from .._realisation import ModalRealisation, from_poles
 from ..lti import RationalTF
 
 __all__ = ["StableTMF", "partial_fractions", "pole_sections", "section_poles", "simulate_modal"]
@@ -26,14 +29,6 @@ __all__ = ["StableTMF", "partial_fractions", "pole_sections", "section_poles", "
 
 def _f(x) -> float:
     return float(np.asarray(x).reshape(-1)[0])
-
-
-def _polymul(a: Array, b: Array) -> Array:
-    n, m = a.shape[-1], b.shape[-1]
-    out = jnp.zeros((n + m - 1,), jnp.result_type(a, b))
-    for j in range(m):
-        out = out.at[j : j + n].add(a * b[j])
-    return out
 
 
 def pole_sections(poles: np.ndarray) -> tuple[list[float], list[float], list[float]]:
@@ -119,7 +114,7 @@ def polish_roots(den: Float[Array, " n1"], start: Array, iterations: int = 24) -
     return z
 
 
-class StableTMF(eqx.Module):
+class StableTMF(AbstractLinearModel):
     """A rational TMF of equal orders with an always-stable denominator, `x_t = T(s) x_e`.
 
     `T(s) = B(σ) / A(σ)`, `σ = s / w0`, `A(σ) = Π (σ² + 2ζ_k ω_k σ + ω_k²) (σ + p)`, with
@@ -129,7 +124,8 @@ class StableTMF(eqx.Module):
 
     **Fields:** `num` `(order + 1,)` numerator of `B(σ)`, highest power first;
     `log_omega`, `log_zeta` `(order // 2,)`; `log_pole` `(order % 2,)`; `w0` [rad/s]
-    and `dt` [s] are constants.
+    and `dt` [s] are constants (`simulate` and calling the TMF on a record use `dt`;
+    `predict(u, dt)` and `jaxvs.simulate` take the sample time they are given).
     """
 
     num: Float[Array, " n1"]
@@ -142,6 +138,35 @@ class StableTMF(eqx.Module):
     @property
     def order(self) -> int:
         return self.num.shape[-1] - 1
+
+    @property
+    def n_inputs(self) -> int:
+        return 1
+
+    @property
+    def n_outputs(self) -> int:
+        return 1
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        return self.num.shape[:-1]
+
+    def response(self, s: Complex[Array, " freq"]) -> Complex[Array, "freq out in"]:
+        sigma = s / self.w0
+        den = self.scaled_denominator().astype(sigma.dtype)
+        g = jnp.polyval(self.num.astype(sigma.dtype), sigma) / jnp.polyval(den, sigma)
+        return g[:, None, None]
+
+    def modal_realisation(self) -> ModalRealisation:
+        # T(s) = d + Σ r_i / (σ − p_i) = d + Σ r_i w0 / (s − w0 p_i)
+        p = self.scaled_poles()
+        d, r = partial_fractions(self.num, p)
+        return from_poles(
+            p * self.w0,
+            (r * self.w0)[None, :],
+            jnp.ones((p.shape[0], 1), p.dtype),
+            jnp.reshape(d, (1, 1)),
+        )
 
     def flat(self) -> Float[Array, " p"]:
         return jnp.concatenate([self.num, self.log_omega, self.log_zeta, self.log_pole])
@@ -180,9 +205,9 @@ class StableTMF(eqx.Module):
         w, z = jnp.exp(lw), jnp.exp(lz)
         den = jnp.ones((1,), w.dtype)
         for k in range(w.shape[0]):
-            den = _polymul(den, jnp.stack([jnp.ones_like(w[k]), 2 * z[k] * w[k], w[k] ** 2]))
+            den = polymul(den, jnp.stack([jnp.ones_like(w[k]), 2 * z[k] * w[k], w[k] ** 2]))
         for k in range(lp.shape[0]):
-            den = _polymul(den, jnp.stack([jnp.ones_like(lp[k]), jnp.exp(lp[k])]))
+            den = polymul(den, jnp.stack([jnp.ones_like(lp[k]), jnp.exp(lp[k])]))
         return den
 
     def simulate_shifted(

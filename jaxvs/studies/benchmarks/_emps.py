@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._misc import legendre
 from ...data import load_emps
 from ...models import AbstractDynamicFriction, AbstractFriction, RigidAxis, solve_sampled
 from ._shooting import AbstractSimulator
@@ -75,16 +76,6 @@ EMPS_PUBLISHED = (
 107–198 s is given for the three networks together)."""
 
 
-def _legendre(x: Array, order: int) -> Array:
-    """`(P_1(x), ..., P_order(x))` by Bonnet's recursion."""
-    p_prev, p = jnp.ones_like(x), x
-    out = [p]
-    for k in range(1, order):
-        p_prev, p = p, ((2 * k + 1) * x * p - k * p_prev) / (k + 1)
-        out.append(p)
-    return jnp.stack(out)
-
-
 class PositionForce(eqx.Module):
     r"""A smooth position-dependent force, a Legendre series over the stroke:
     `P(q) = Σ_{k=1..n} c_k P_k((q − centre) / half_range)`.
@@ -122,8 +113,7 @@ class PositionForce(eqx.Module):
     def __call__(self, q: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
         """Force [N] at position `q` [m] (opposing the drive force, like friction)."""
         x = (jnp.asarray(q) - self.centre) / self.half_range
-        basis = _legendre(x, self.coefficients.shape[0])
-        return jnp.tensordot(self.coefficients, basis, axes=1)
+        return legendre(x, self.coefficients.shape[0]) @ self.coefficients
 
 
 class OpenLoopAxis(AbstractSimulator):

@@ -16,7 +16,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ...data import Record, load
+from ...data import Record, load, load_renamed, parse_header, rename_signals
 from ..thermal import ThermalFitWarning, resample_sparse
 
 __all__ = ["DesignDataWarning", "DesignRecord", "Prepared", "prepare"]
@@ -141,7 +141,33 @@ def _from_record(rec: Record, name: str, target: str | None) -> DesignRecord:
     return DesignRecord(name, np.asarray(rec.t), rec.dt, sig, y, units)
 
 
-def _read(item: Any, target: str, index: int, has_samples: bool) -> DesignRecord:
+def _new_names(columns: Mapping[str, Any], signals: Mapping[str, str]) -> dict[str, str]:
+    """`{column: new name}` for the user's mapping `signals` (new name -> column, written
+    with or without its unit) over the columns of one experiment."""
+    out = {}
+    for name, column in signals.items():
+        key = column if column in columns else parse_header(column)[0]
+        if key not in columns:
+            raise ValueError(
+                f"design: the column {column!r} mapped to {name!r} is not in the data; its "
+                f"columns are {sorted(columns)}."
+            )
+        out[key] = name
+    return out
+
+
+def _renamed(columns: Mapping[str, Any], new: Mapping[str, str]) -> dict[str, Any]:
+    return {new.get(k, k): v for k, v in columns.items()}
+
+
+def _read(
+    item: Any, target: str, index: int, has_samples: bool, signals: Mapping[str, str] | None
+) -> DesignRecord:
+    if signals:
+        if isinstance(item, Record):
+            item = rename_signals(item, signals)
+        elif isinstance(item, Mapping):
+            item = _renamed(item, _new_names(item, signals))
     if isinstance(item, Record):
         if target not in item and not has_samples:
             raise ValueError(
@@ -157,11 +183,14 @@ def _read(item: Any, target: str, index: int, has_samples: bool) -> DesignRecord
         if not path.exists():
             raise ValueError(f"design: no such file: {path}")
         try:
-            rec = load(path)
+            rec = load_renamed(path, signals)
         except ValueError as err:
             if path.suffix.lower() != ".csv" or "non-finite" not in str(err):
                 raise ValueError(f"design: cannot read {path}: {err}") from None
             cols, units = _read_csv_nan(path)  # a sparse target: NaN between measurements
+            if signals:
+                new = _new_names(cols, signals)
+                cols, units = _renamed(cols, new), _renamed(units, new)
             exp = _from_mapping(cols, str(path), target)
             return exp._replace(units={k: u for k, u in units.items() if k in exp.signals})
         if isinstance(rec, list):
@@ -289,6 +318,7 @@ def prepare(
     holdout: float = 0.3,
     stop_fraction: float = 0.2,
     warmup: float = 0.05,
+    signals: Mapping[str, str] | None = None,
 ) -> Prepared:
     """Read the experiments, check them, resample a sparse target, and split.
 
@@ -305,9 +335,10 @@ def prepare(
     if not 0 < holdout < 1:
         raise ValueError(f"design: holdout must lie in (0, 1); got {holdout}.")
     samples = _samples(target_samples, target)
-    cal = [_read(d, target, i, samples is not None) for i, d in enumerate(_as_list(data))]
+    sparse = samples is not None
+    cal = [_read(d, target, i, sparse, signals) for i, d in enumerate(_as_list(data))]
     val = [
-        _read(d, target, i, samples is not None)
+        _read(d, target, i, sparse, signals)
         for i, d in enumerate(_as_list(validation), start=len(cal))
     ]
     if not cal:

@@ -10,7 +10,7 @@ held-out data.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import jax.numpy as jnp
@@ -19,6 +19,7 @@ import numpy as np
 
 from ..._misc import require_x64
 from ..._progress import Progress
+from ...signal import block_bootstrap_means, block_length
 from ..thermal import mapd as _mapd, r2 as _r2
 from ._data import prepare
 from ._model import (
@@ -31,7 +32,7 @@ from ._model import (
     delayed_features,
 )
 from ._report import DesignReport
-from ._score import block_length, bootstrap_mse, rank_designs, residual_checks
+from ._score import rank_designs, residual_checks
 from ._search import (
     Candidate,
     GroupResult,
@@ -141,6 +142,7 @@ def design(
     seed: int = 0,
     progress: bool | None = None,
     compare_loop: bool = False,
+    signals: Mapping[str, str] | None = None,
 ) -> DesignReport:
     """Search inputs, delays and model structures for a virtual sensor of `target`, and
     rank the designs on held-out data (DESIGN.md §3.4).
@@ -180,6 +182,8 @@ def design(
     - `compare_loop`: for benchmarks: also fit every group one candidate after another
       with the same compiled trainer and record both times in `timing.groups` (more than
       doubles the run time).
+    - `signals`: the file's own column names mapped onto the names used here,
+      `{"T_bearing": "Lagertemperatur", "t": "Zeit"}` (`jaxvs.data.rename_signals`).
 
     **Returns:**
 
@@ -217,6 +221,7 @@ def design(
         validation=validation,
         target_samples=target_samples,
         holdout=holdout,
+        signals=signals,
     )
     checked = _check_data(prep)  # `jaxvs check` on the design data, before any fitting
     if checked["blocking"]:
@@ -483,7 +488,7 @@ def _score_and_rank(done, prep, names, pool, dmax, dt, norm, seed):
     E = y[V][None, :] - P[:, V]
     rmse = np.sqrt(np.mean(E**2, axis=1))
     block = block_length(E[int(np.argmin(rmse))])
-    reps = bootstrap_mse(E**2, block, seed=seed)
+    reps = block_bootstrap_means(E**2, block, 400, np.random.default_rng(seed))
     params = np.array([_n_params(done[i][0]) for i in ok])
     order, over = rank_designs(rmse, params, reps)
     u_val = {n: prep.U[V, j] for j, n in enumerate(names)}

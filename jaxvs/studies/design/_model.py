@@ -18,10 +18,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
+from ..._misc import concrete
 from ...data import Record
-from ...models import Perceptron
+from ...models import AbstractModel, Perceptron
 
 __all__ = [
     "AbstractDesignCore",
@@ -121,7 +122,7 @@ def delayed_features(U: np.ndarray, starts: np.ndarray, columns) -> np.ndarray:
     return out
 
 
-class DesignedSensor(eqx.Module):
+class DesignedSensor(AbstractModel):
     """A virtual sensor found by [`jaxvs.design`][]: `target ≈ f(inputs and their delays)`.
 
     **Fields:**
@@ -136,7 +137,9 @@ class DesignedSensor(eqx.Module):
     - `core`: the fitted model on the normalised features.
 
     Call it with a `jaxvs.data.Record` (or a mapping name -> array) holding the inputs, or
-    with an array `(time, input)` in the order of `inputs`; it returns `(time,)`.
+    with an array `(time, input)` in the order of `inputs`; it returns `(time,)`. As a
+    `jaxvs.models.AbstractModel`, `predict(u, dt)` is the same prediction from the input
+    array (pure JAX: `jit`, `vmap`, gradients, `jaxvs.calibrate`).
     """
 
     inputs: tuple[str, ...] = eqx.field(static=True)
@@ -188,9 +191,32 @@ class DesignedSensor(eqx.Module):
 
     def __call__(self, data: Any) -> Float[Array, " time"]:
         """The predicted target `(time,)` [target unit] for one experiment."""
-        U = self._matrix(data)
-        Un = (U - np.asarray(self.u_offset)) / np.asarray(self.u_scale)
-        starts = np.zeros(U.shape[0], bool)
-        starts[0] = True
-        X = jnp.asarray(delayed_features(Un, starts, self.columns))
-        return self.y_offset + self.y_scale * self.core(X, jnp.asarray(starts))
+        return self.predict(self._matrix(data), self.dt)
+
+    def predict(self, u: Float[ArrayLike, "time input"], dt: float) -> Float[Array, " time"]:
+        """The predicted target `(time,)` from the inputs `(time, input)` in the order of
+        `inputs`, sampled every `dt` [s] (the sensor's own `dt`: its delays and dynamics
+        count samples)."""
+        value = concrete(dt)
+        if value is not None and abs(float(value) - self.dt) > 1e-9 * self.dt:
+            raise ValueError(
+                f"DesignedSensor: the inputs are sampled every {float(value)} s but the "
+                f"sensor was designed at {self.dt} s (its delays and dynamics are in "
+                "samples). Resample the inputs first."
+            )
+        U = jnp.asarray(u)
+        if U.ndim == 1 and len(self.inputs) == 1:
+            U = U[:, None]
+        if U.ndim != 2 or U.shape[1] != len(self.inputs):
+            raise ValueError(
+                f"DesignedSensor: inputs must have shape (time, {len(self.inputs)}) in the order "
+                f"{list(self.inputs)}; got {U.shape}."
+            )
+        Un = (U - self.u_offset) / self.u_scale
+        k = jnp.arange(U.shape[0])
+        # held at the first sample before the record began (the machine at rest)
+        X = jnp.stack(
+            [Un[:, i] ** 2 if d < 0 else Un[jnp.maximum(k - d, 0), i] for i, d in self.columns],
+            axis=1,
+        )
+        return self.y_offset + self.y_scale * self.core(X, k == 0)

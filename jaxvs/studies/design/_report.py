@@ -9,11 +9,13 @@ import os
 import pathlib
 import shutil
 import tempfile
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from ..._html import markdown_to_html, report_html
+from ..._io import save_model
 from ..._misc import json_safe
 
 __all__ = ["DesignReport"]
@@ -195,21 +197,36 @@ class DesignReport:
     def _repr_html_(self) -> str:
         return markdown_to_html(self.to_markdown())
 
-    def save(self, out: str | os.PathLike, *, figures: bool = True) -> pathlib.Path:
-        """Write `report.json`, `report.md`, `report.html`, the figures and `best.eqx`
-        (the best design, for `jaxvs.load_model`) to the folder `out`, atomically: into a
-        temporary folder beside it, then renamed (an existing `out` is replaced only once
-        the new one is complete)."""
-        from ..._io import save_model
+    def save(
+        self,
+        out: str | os.PathLike,
+        *,
+        figures: Callable[[DesignReport, pathlib.Path], list[str]] | None = None,
+    ) -> pathlib.Path:
+        """Write `report.json`, `report.md`, `report.html` and `best.eqx` (the best
+        design, for `jaxvs.load_model`) to the folder `out`, atomically: into a temporary
+        folder beside it, then renamed (an existing `out` is replaced only once the new one
+        is complete).
 
+        **Arguments:**
+
+        - `out`: the report folder.
+        - `figures`: draws the figures into the folder and returns their file names, e.g.
+          `jaxvs.plotting.plot_design`; they are embedded in `report.html`. Without it the
+          report has no figures (the library does not draw; plotting is its caller's).
+        """
+        if isinstance(figures, bool) or not (figures is None or callable(figures)):
+            raise TypeError(
+                f"figures must be a drawing function such as jaxvs.plotting.plot_design or "
+                f"None, got {figures!r}; for the figures write `from jaxvs.plotting import "
+                "plot_design` and report.save(out, figures=plot_design)."
+            )
         out = pathlib.Path(out)
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = pathlib.Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
         try:
-            if figures and self.content["designs"]:
-                from ...plotting import plot_design
-
-                self.content["figures"] = plot_design(self, tmp)
+            if figures is not None and self.content["designs"]:
+                self.content["figures"] = list(figures(self, tmp))
             if self.best_model is not None:
                 save_model(
                     tmp / "best.eqx",

@@ -2,7 +2,8 @@
 bootstrap intervals (residuals of virtual sensors are autocorrelated, so samples are
 resampled in contiguous blocks; Künsch 1989, Ann. Statist. 17(3)), residual whiteness
 (Ljung-Box) and residual-input cross-correlation, and a ranking in which a more complex
-design is placed above a simpler one only when its held-out gain is significant.
+design is placed above a simpler one only when its held-out gain is significant. The
+bootstrap itself is `jaxvs.signal.block_bootstrap_means`.
 """
 
 from __future__ import annotations
@@ -13,47 +14,7 @@ import numpy as np
 
 from ..thermal import residual_analysis
 
-__all__ = ["block_length", "bootstrap_mse", "rank_designs", "residual_checks"]
-
-
-def block_length(e: np.ndarray) -> int:
-    """Block length [samples] of the moving-block bootstrap for residuals `e`.
-
-    Heuristic: the lag where the residual autocorrelation first falls below 1/e (the
-    correlation time), at least `n^(1/3)` (Hall, Horowitz & Jing 1995) and at most `n/5`.
-    """
-    n = e.size
-    c = e - e.mean()
-    var = np.dot(c, c)
-    lo = max(2, int(round(n ** (1 / 3))))
-    if var == 0 or n < 10:
-        return min(lo, max(1, n // 5))
-    m = 1 << int(math.ceil(math.log2(2 * n)))
-    f = np.fft.rfft(c, m)
-    acf = np.fft.irfft(f * np.conj(f), m)[: n // 2] / var
-    below = np.flatnonzero(acf < math.exp(-1))
-    tc = int(below[0]) if below.size else n // 5
-    return int(min(max(lo, tc), max(1, n // 5)))
-
-
-def bootstrap_mse(E2: np.ndarray, block: int, reps: int = 400, seed: int = 0) -> np.ndarray:
-    """Moving-block bootstrap replicates of the mean of squared errors.
-
-    **Arguments:** `E2` `(design, sample)` squared held-out errors (same samples for every
-    design, so the replicates are paired); `block` [samples]; `reps` replicates.
-
-    **Returns:** `(design, reps)` replicate MSEs (circular blocks, the same block starts for
-    every design).
-    """
-    D, n = E2.shape
-    block = max(1, min(block, n))
-    k = -(-n // block)
-    ext = np.concatenate([E2, E2[:, : block - 1]], axis=1)
-    cs = np.concatenate([np.zeros((D, 1)), np.cumsum(ext, axis=1)], axis=1)
-    sums = cs[:, block : block + n] - cs[:, :n]  # (D, n): block starting at each sample
-    rng = np.random.default_rng(seed)
-    starts = rng.integers(0, n, size=(reps, k))
-    return sums[:, starts].sum(axis=2) / (k * block)
+__all__ = ["rank_designs", "residual_checks"]
 
 
 def residual_checks(e: np.ndarray, inputs: dict[str, np.ndarray], max_lag: int = 20) -> dict:

@@ -21,8 +21,8 @@ import warnings
 import numpy as np
 import scipy.signal as ss
 
+from ...signal import block_bootstrap_means, block_length
 from ..thermal import rank_inputs
-from ._score import block_length, bootstrap_mse
 from ._search import Candidate
 
 __all__ = ["candidates", "forward_selection", "input_ranking"]
@@ -30,7 +30,7 @@ __all__ = ["candidates", "forward_selection", "input_ranking"]
 
 def input_ranking(U: np.ndarray, y: np.ndarray, names: list[str]) -> list[dict]:
     """Correlation, partial correlation (given all other candidates) and the relevance /
-    redundancy ranking of `jaxvs.calibration.rank_inputs`, on training samples."""
+    redundancy ranking of `jaxvs.studies.rank_inputs`, on training samples."""
     ok = [j for j in range(U.shape[1]) if np.ptp(U[:, j]) > 0]
     data = {names[j]: U[:, j] for j in ok}
     data["__target__"] = y
@@ -144,7 +144,8 @@ def forward_selection(
         last_tried = {j: r for j, (r, _) in tried.items()}
         j = min(tried, key=lambda k: tried[k][0])
         r, e = tried[j]
-        reps = bootstrap_mse(np.stack([current**2, e**2]), block, seed=seed)
+        pair = np.stack([current**2, e**2])
+        reps = block_bootstrap_means(pair, block, 400, np.random.default_rng(seed))
         p_better = float(np.mean(reps[1] < reps[0]))
         accept = (r < 0.98 * cur_rmse) and p_better >= 0.95
         steps.append(

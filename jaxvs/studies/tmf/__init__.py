@@ -3,6 +3,7 @@ routes (PRBS, hammer, FRFs, modal) and position-dependent TMF families."""
 
 from ._tmf import (
     ExcitationLocationWarning as ExcitationLocationWarning,
+    TMFFit as TMFFit,
     TMFIdentification as TMFIdentification,
     check_excitation_location as check_excitation_location,
     family_error as family_error,

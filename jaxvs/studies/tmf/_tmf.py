@@ -22,6 +22,7 @@ with TCP-side excitation. [`tmf_family`][] identifies a family smooth in the pos
 another axis in one vectorised calibration.
 """
 
+import dataclasses
 import functools
 import warnings
 from typing import Any, Literal, NamedTuple
@@ -30,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
+from ..._misc import options_object
 from ...calibration import (
     CalibrationResult,
     FrequencyError,
@@ -67,6 +69,37 @@ STATIC_GAIN_TOL = 0.1
 
 class ExcitationLocationWarning(UserWarning):
     """A TMF was identified with the force on the wrong side for its intended use."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TMFFit:
+    """How a TMF is identified from the modal parameters of two FRFs of one hammer test
+    ([`tmf_from_impacts`][], [`tmf_from_hammer`][]), as one frozen object that can be built
+    once and passed to several identifications. Its fields are also accepted as keywords of
+    those functions.
+
+    **Fields:**
+
+    - `n_modes`, `max_order`: as for `jaxvs.modal_fit` (default: modes found by the
+      stabilisation diagram, up to model order 40).
+    - `lower_residual`: fit the lower residual of the measured quantity (default `False`:
+      a supported structure fitted to the receptance, see [`tmf_from_impacts`][]).
+    - `weights`: of the residue fit (LSFD): `"uniform"`, `"relative"` or an array (see
+      [`tmf_from_impacts`][]).
+    - `order`: optional `(nb, na)` of a reduced rational TMF refitted over the band.
+    - `excitation`, `operation`: see [`check_excitation_location`][] (default: hammer at
+      the encoder, the drive-side TMF); `excitation=None` skips the check.
+    - `static_gain`: imposed `T(0)` (default 1; `None` keeps the fitted gain).
+    """
+
+    n_modes: int | None = None
+    max_order: int = 40
+    lower_residual: bool = False
+    weights: Any = "uniform"
+    order: tuple[int, int] | int | None = None
+    excitation: Side | None = "encoder"
+    operation: Literal["drive", "tcp"] = "drive"
+    static_gain: float | None = 1.0
 
 
 class TMFIdentification(NamedTuple):
@@ -427,19 +460,13 @@ def tmf_from_impacts(
     H_tool: ArrayLike,
     H_encoder: ArrayLike,
     *,
-    n_modes: int | None = None,
     band: tuple[float, float] | None = None,
     quantity: Literal["accelerance", "mobility", "receptance"] = "accelerance",
-    order: tuple[int, int] | int | None = None,
     tmf_band: tuple[float, float] | None = None,
-    excitation: Side | None = "encoder",
-    operation: Literal["drive", "tcp"] = "drive",
     window_tau: float | None = None,
     highpass: float | Literal["auto"] | None = None,
-    lower_residual: bool = False,
-    max_order: int = 40,
-    weights: Literal["uniform", "relative"] | ArrayLike = "uniform",
-    static_gain: float | None = 1.0,
+    options: TMFFit | None = None,
+    **keywords: Any,
 ) -> TMFIdentification:
     r"""Route (b): TMF from the modal parameters of two FRFs of one hammer test.
 
@@ -478,7 +505,9 @@ def tmf_from_impacts(
 
     - `omega`: `(freq,)` angular frequencies [rad/s] of the FRFs.
     - `H_tool`, `H_encoder`: `(freq,)` complex FRFs of the same quantity.
-    - `n_modes`, `band` (rad/s), `quantity`, `max_order`: as for `jaxvs.modal_fit`.
+    - `band` (rad/s), `quantity`: as for `jaxvs.modal_fit`.
+    - `options`: a [`TMFFit`][] (`n_modes`, `max_order`, `lower_residual`, `weights`,
+      `order`, `excitation`, `operation`, `static_gain`), or its fields as keywords.
     - `order`: optional `(nb, na)` of the reduced TMF.
     - `tmf_band`: `(low, high)` [rad/s] over which the reduced TMF is fitted (default
       `band`); keep it inside the band where both modal fits are good.
@@ -508,6 +537,14 @@ def tmf_from_impacts(
     windowed system when `window_tau` is set, see `jaxvs.signal.exponential_window_correction`).
     """
     where = "tmf_from_impacts"
+    o = options_object(TMFFit, options, keywords, where)
+    n_modes, max_order, lower_residual, weights = (
+        o.n_modes,
+        o.max_order,
+        o.lower_residual,
+        o.weights,
+    )
+    order, excitation, operation, static_gain = o.order, o.excitation, o.operation, o.static_gain
     if excitation is not None:
         _check_side(excitation, "excitation", where)
     omega = np.asarray(omega, float)
@@ -641,17 +678,11 @@ def tmf_from_hammer(
     fs: float,
     *,
     band: tuple[float, float] | None = None,
-    n_modes: int | None = None,
     tau: float | Literal["auto"] | None = "auto",
     highpass: float | Literal["auto"] | None = "auto",
-    order: tuple[int, int] | int | None = None,
     tmf_band: tuple[float, float] | None = None,
-    lower_residual: bool = False,
-    excitation: Side | None = "encoder",
-    operation: Literal["drive", "tcp"] = "drive",
-    max_order: int = 40,
-    weights: Literal["uniform", "relative"] = "uniform",
-    static_gain: float | None = 1.0,
+    options: TMFFit | None = None,
+    **keywords: Any,
 ) -> TMFIdentification:
     r"""Route (b) from raw hammer records: H1 FRFs with impact windows, then
     [`tmf_from_impacts`][].
@@ -671,13 +702,13 @@ def tmf_from_hammer(
     - `band`: `(low, high)` [Hz] of the modal fit; default from 5 Hz (accelerometers are
       unreliable below) to where the force spectrum has dropped by 10 dB (the hammer's
       band), at most 0.4 fs.
-    - `n_modes`, `max_order`: as for `jaxvs.modal_fit`.
     - `tau`: exponential-window time constant [s]; `"auto"` (default): a tenth of the
       time after which the responses sink into their noise; `None`: no exponential window.
     - `highpass`: accelerometer high-pass corner [**Hz**], `"auto"` (default) or `None`;
       see [`tmf_from_impacts`][].
-    - `order`, `lower_residual`, `excitation`, `operation`, `weights`, `static_gain`: see
-      [`tmf_from_impacts`][]; `tmf_band` [**Hz**] as there (default `band`).
+    - `tmf_band` [**Hz**]: as in [`tmf_from_impacts`][] (default `band`).
+    - `options`: a [`TMFFit`][] (modal fit, residue fit, reduction, excitation check), or
+      its fields as keywords, as in [`tmf_from_impacts`][].
 
     **Returns:** a [`TMFIdentification`][] with route `"impacts"`; `estimate` is the
     measured TMF `H_TE / H_EE` of plain H1 estimates (force window only, kind
@@ -690,6 +721,7 @@ def tmf_from_hammer(
     from ...signal import frf_h1, impact_windows
 
     where = "tmf_from_hammer"
+    options = options_object(TMFFit, options, keywords, where)
     force = np.asarray(force, float)
     a_tool, a_encoder = np.asarray(a_tool, float), np.asarray(a_encoder, float)
     if not (force.shape == a_tool.shape == a_encoder.shape) or force.ndim not in (1, 2):
@@ -746,19 +778,12 @@ def tmf_from_hammer(
         2 * np.pi * f[keep],
         H[0],
         H[1],
-        n_modes=n_modes,
         band=(2 * np.pi * band[0], 2 * np.pi * band[1]),
         quantity="accelerance",
-        order=order,
         tmf_band=None if tmf_band is None else (2 * np.pi * tmf_band[0], 2 * np.pi * tmf_band[1]),
-        excitation=excitation,
-        operation=operation,
         window_tau=tau,
         highpass=hp,
-        lower_residual=lower_residual,
-        max_order=max_order,
-        weights=weights,
-        static_gain=static_gain,
+        options=options,
     )
     return result._replace(estimate=estimate)
 

@@ -16,8 +16,6 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Complex, Float
 
-from ._statespace import StateSpace
-
 
 class ModalRealisation(eqx.Module):
     """Real block-diagonal state-space realisation `x' = A x + B u, y = C x + D u`.
@@ -29,7 +27,7 @@ class ModalRealisation(eqx.Module):
     - `c`: `(out, block, 2)` columns of `C` belonging to each block.
     - `d`: `(out, in)` feedthrough.
     - `n_states`: true order; when odd, the last state of the last block is padding
-      (zero input and output coupling) and is dropped by `to_state_space`.
+      (zero input and output coupling) and is dropped by `dense`.
     """
 
     a: Float[Array, "block 2 2"]
@@ -42,7 +40,8 @@ class ModalRealisation(eqx.Module):
     def n_blocks(self) -> int:
         return self.a.shape[-3]
 
-    def to_state_space(self) -> StateSpace:
+    def dense(self) -> tuple[Array, Array, Array, Array]:
+        """The dense matrices `(A, B, C, D)` (`jaxvs.models.StateSpace(*r.dense())`)."""
         nb = self.n_blocks
         eye = jnp.eye(nb, dtype=self.a.dtype)
         # block_diag via a Kronecker-like scatter: A[2i + r, 2j + s] = δ_ij a[i, r, s].
@@ -50,7 +49,7 @@ class ModalRealisation(eqx.Module):
         B = self.b.reshape(2 * nb, -1)
         C = self.c.reshape(self.c.shape[0], 2 * nb)
         n = self.n_states
-        return StateSpace(A[:n, :n], B[:n], C[:, :n], self.d)
+        return A[:n, :n], B[:n], C[:, :n], self.d
 
     def response(self, s: Complex[Array, " freq"]) -> Complex[Array, "freq out in"]:
         a = self.a
