@@ -268,6 +268,7 @@ LONG_SIGNATURES = {
     # Public entry points that mirror a command line: one keyword per option of the command.
     "jaxvs.diagnosis._diagnose:diagnose",  # jaxvs diagnose
     "jaxvs.studies.design._design:design",  # jaxvs design
+    "jaxvs.diagnosis._discover:discover",  # the discovery options of jaxvs diagnose
     # A peer's signature kept on purpose: the keywords of scipy.signal.csd.
     "jaxvs.signal._spectral:csd",
     # Pending: diagnosis and design internals, rebuilt in their own change.
@@ -292,6 +293,13 @@ LONG_SIGNATURES = {
     "jaxvs.studies.thermal._train:_lm_impl",
     "jaxvs.studies.tmf._tmf:tmf_from_frfs",
     "jaxvs.studies.tmf._tmf:_add_modes_by_misfit",
+    "jaxvs.diagnosis._discover:_fit_formula",
+    # Pending: the lane flags of the LTI simulation engine (lanes of the table, of the
+    # input and of the target, SISO shapes, reduction) to be drawn into one static layout.
+    "jaxvs.models._simulate:_engine",
+    "jaxvs.models._simulate:_map_groups",
+    "jaxvs.models._simulate:_run_group",
+    "jaxvs.models._simulate:_simulate_flat",
 }
 
 
