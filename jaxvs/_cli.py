@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from . import _interrupt
+from ._files import regular_file
 from ._outdir import ReportFolder, UsageError
 from ._version import __version__
 
@@ -226,7 +227,7 @@ def _input_files(paths: list[str], option: str) -> list[str]:
     """Every input path exists, is a file and can be read; else a one-line user error."""
     for text in paths:
         path = Path(text)
-        if not path.exists():
+        if not path.exists() and not path.is_symlink():
             near = (
                 sorted(p.name for p in path.parent.glob(f"*{path.suffix}"))[:3]
                 if (path.parent.is_dir())
@@ -238,6 +239,11 @@ def _input_files(paths: list[str], option: str) -> list[str]:
             raise UsageError(
                 f"{option} {text} is a folder; give the data file(s) in it, e.g. {text}/*.csv."
             )
+        try:  # a FIFO or a device would block the read below; a link loop is named
+            regular_file(path, option)
+        except (ValueError, OSError) as err:
+            said = _one_line(err).removeprefix(f"{option}: ")
+            raise UsageError(f"{option} {text}: {said}") from None
         try:
             with open(path, "rb") as handle:
                 head = handle.read(1)

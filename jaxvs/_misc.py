@@ -181,4 +181,3 @@ def json_safe(x: Any) -> Any:
     if isinstance(x, np.bool_):
         return bool(x)
     return x
-

@@ -625,6 +625,7 @@ def load_npz(
         with open(file, "rb") as handle, np.load(handle, allow_pickle=False) as archive:
             if not hasattr(archive, "files"):
                 raise ValueError("it holds a single .npy array, not an archive of named arrays")
+            _check_npz_sizes(archive)
             variables = {key: archive[key] for key in archive.files}
     except Exception as error:
         # zipfile, zlib, EOF and format errors of a truncated or foreign file, and pickled
@@ -636,6 +637,26 @@ def load_npz(
     return _from_variables(
         variables, time=time, dt=dt, names=names, source=source, time_rtol=time_rtol
     )
+
+
+def _check_npz_sizes(archive: Any) -> None:
+    """Each member's array header must not declare more bytes than the member holds, so a
+    damaged or crafted header cannot make NumPy allocate more than the archive contains."""
+    for info in archive.zip.infolist():
+        with archive.zip.open(info) as member:
+            version = np.lib.format.read_magic(member)
+            read = (
+                np.lib.format.read_array_header_1_0
+                if version == (1, 0)
+                else np.lib.format.read_array_header_2_0
+            )
+            shape, _, dtype = read(member)
+        need = int(np.prod(shape, dtype=object)) * dtype.itemsize
+        if need > info.file_size:
+            raise ValueError(
+                f"its member {info.filename} declares {need} bytes of data but holds "
+                f"{info.file_size}; it is truncated or edited"
+            )
 
 
 def _from_variables(

@@ -49,7 +49,6 @@ class AbstractMechanics(eqx.Module):
     def __check_init__(self):
         check_parameters(self)
 
-
     @property
     @abc.abstractmethod
     def n_dof(self) -> int:
@@ -237,7 +236,6 @@ class BallScrew(eqx.Module):
 
     def __check_init__(self):
         check_parameters(self)
-
 
     length: Float[Array, ""]
     diameter: Float[Array, ""]
