@@ -326,7 +326,9 @@ def _solver_result(result: optx.RESULTS) -> RESULTS:
     for name in ("nonfinite", "nonfinite_input", "nonlinear_divergence"):
         out = RESULTS.where(result == getattr(optx.RESULTS, name), RESULTS.nonfinite, out)
     for name in ("singular", "breakdown", "stagnation", "conlim"):
-        out = RESULTS.where(result == getattr(optx.RESULTS, name), RESULTS.linear_solve_failed, out)
+        out = RESULTS.where(
+            result == getattr(optx.RESULTS, name), RESULTS.linear_solve_failed, out
+        )
     return out
 
 
@@ -432,7 +434,9 @@ def _impl(
         singular = jnp.any(unidentified) & (result == RESULTS.successful)
         result = RESULTS.where(
             singular,
-            RESULTS.where(jnp.any(zero_col0), RESULTS.degenerate_initial_guess, RESULTS.singular),
+            RESULTS.where(
+                jnp.any(zero_col0), RESULTS.degenerate_initial_guess, RESULTS.singular
+            ),
             result,
         )
     else:

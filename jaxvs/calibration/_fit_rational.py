@@ -296,7 +296,9 @@ def _fit_batch(
         # singular > successful.
         result = _lm.lm_result(st)
         ok_or_steps = (result == RESULTS.successful) | (result == RESULTS.max_steps_reached)
-        result = RESULTS.where((result == RESULTS.successful) & singular, RESULTS.singular, result)
+        result = RESULTS.where(
+            (result == RESULTS.successful) & singular, RESULTS.singular, result
+        )
         res_norm = jnp.sqrt(2.0 * st.cost)
         rel_err = res_norm / jnp.sqrt(jnp.sum(ww * (hr**2 + hi**2)))
         # Unstable data: the stable optimum is > 2x worse in error (> 4x in cost) than

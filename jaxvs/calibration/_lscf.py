@@ -319,7 +319,9 @@ def _diagram_arrays(omega, H, W, p_max: int, freq_tol, damp_tol, mac_tol):
     n_in = H.shape[2]
     R, S, T = _normal_matrices(omega, H, W, p_max, dt)
     orders = jnp.arange(1, p_max + 1)
-    z, lam, vec = jax.vmap(lambda p: _poles_of_order(p, R, S, T, dt, n_in, p_max))(orders)
+    z, lam, vec = jax.vmap(
+        lambda p: _poles_of_order(p, R, S, T, dt, n_in, p_max)
+    )(orders)
     wn = jnp.abs(lam)
     zeta = -lam.real / jnp.where(wn > 0, wn, 1.0)
     # Physical poles: not padding, upper half plane, stable, inside the band.
@@ -342,11 +344,8 @@ def _diagram_arrays(omega, H, W, p_max: int, freq_tol, damp_tol, mac_tol):
         df = jnp.min(d, axis=1)
         dz = jnp.abs(zeta_k - pzeta[j]) / jnp.where(zeta_k > 0, zeta_k, 1.0)
         mac = _mac(vec_k, pvec[j])
-        return (
-            jnp.where(has, j, -1),
-            has & (df <= freq_tol),
-            has & (dz <= damp_tol),
-            (has & (mac >= mac_tol)),
+        return jnp.where(has, j, -1), has & (df <= freq_tol), has & (dz <= damp_tol), (
+            has & (mac >= mac_tol)
         )
 
     prev, sf, sd, sv = jax.vmap(compare)(

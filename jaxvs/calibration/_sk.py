@@ -264,7 +264,9 @@ def normal_equations(
     return cost, jtj, jtr
 
 
-def model_cost(theta: Float[Array, " p"], data: Data, grid: Grid, nb: int) -> Float[Array, ""]:
+def model_cost(
+    theta: Float[Array, " p"], data: Data, grid: Grid, nb: int
+) -> Float[Array, ""]:
     """`½ Σ w² |B/A - H|²` only."""
     hr, hi, w2 = data
     gr, gi, *_ = _model(theta, grid, nb)

@@ -190,7 +190,6 @@ def solve_sampled(
         raise ValueError(f"{where}: n_substeps must be an int >= 1; got {n_substeps!r}.")
     if not dt > 0:
         raise ValueError(f"{where}: dt must be > 0 s; got {dt}.")
-
     def interval(y, t0, u):
         return zoh_interval(plant, y, u, args, dt, n_substeps, solver, t0=t0)
 
@@ -236,7 +235,9 @@ def zoh_interval(
     return y
 
 
-def amplification(eigenvalues: ArrayLike, h: float, solver: Any = None) -> np.ndarray:
+def amplification(
+    eigenvalues: ArrayLike, h: float, solver: Any = None
+) -> np.ndarray:
     r"""`|R(λh)|`: the factor by which one step of `solver` multiplies the mode
     `e^{λt}` of a linear ODE, for every eigenvalue `λ` [1/s].
 

@@ -65,7 +65,8 @@ def ballbar_plot(
     return fig
 
 
-def loop_bode_plot(drive, frequency_hz, *, measured=None, measured_label="measured", title=None):
+def loop_bode_plot(drive, frequency_hz, *, measured=None, measured_label="measured",
+                   title=None):
     """Bode diagram of a drive's closed position loop `q/r` from its linearisation, with
     optional estimated FRFs (e.g. H1 from a simulated or measured swept-sine run) on top.
 
@@ -83,9 +84,8 @@ def loop_bode_plot(drive, frequency_hz, *, measured=None, measured_label="measur
     """
     f = np.asarray(frequency_hz, dtype=float)
     H = np.asarray(drive.frequency_response(2 * np.pi * f))
-    fig = bode_plot(
-        f, [H], labels=["linearised q/r"], styles=["k-"], title=title, magnitude_unit="m/m"
-    )
+    fig = bode_plot(f, [H], labels=["linearised q/r"], styles=["k-"], title=title,
+                    magnitude_unit="m/m")
     if measured is not None:
         pairs = [measured] if isinstance(measured, tuple) else list(measured)
         names = [measured_label] if isinstance(measured_label, str) else list(measured_label)
@@ -119,15 +119,8 @@ def scalogram_plot(t, frequency_hz, coefficients, *, ridge_hz=None, title=None, 
         fig, ax = plt.subplots(figsize=(7, 3.5))
     else:
         fig = ax.figure
-    mesh = ax.pcolormesh(
-        np.asarray(t),
-        np.asarray(frequency_hz),
-        db,
-        shading="auto",
-        vmin=-60,
-        vmax=0,
-        cmap="viridis",
-    )
+    mesh = ax.pcolormesh(np.asarray(t), np.asarray(frequency_hz), db, shading="auto",
+                         vmin=-60, vmax=0, cmap="viridis")
     if ridge_hz is not None:
         ax.plot(np.asarray(t), np.asarray(ridge_hz), "w--", lw=1, label="ridge")
         ax.legend(loc="upper right", fontsize=8)

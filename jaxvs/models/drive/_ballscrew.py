@@ -49,6 +49,7 @@ class AbstractMechanics(eqx.Module):
     def __check_init__(self):
         check_parameters(self)
 
+
     @property
     @abc.abstractmethod
     def n_dof(self) -> int:
@@ -236,6 +237,7 @@ class BallScrew(eqx.Module):
 
     def __check_init__(self):
         check_parameters(self)
+
 
     length: Float[Array, ""]
     diameter: Float[Array, ""]

@@ -92,6 +92,7 @@ class PositionLoop(eqx.Module):
     def __check_init__(self):
         check_parameters(self)
 
+
     kp: Float[Array, ""]
 
     def __init__(self, kp: ArrayLike):
@@ -114,6 +115,7 @@ class VelocityLoop(eqx.Module):
 
     def __check_init__(self):
         check_parameters(self)
+
 
     kv: Float[Array, ""]
     ki: Float[Array, ""]
@@ -139,6 +141,7 @@ class AbstractActuator(eqx.Module):
 
     def __check_init__(self):
         check_parameters(self)
+
 
     @property
     @abc.abstractmethod
@@ -717,7 +720,9 @@ def _simulate(drive, r, fe, ua, y0, dt, solver, rtol, atol, max_steps):
             n_substeps=drive.n_substeps,
             solver=solver,
         )
-        dys = jax.vmap(lambda t, y, u, f: drive._plant(t, y, ((u, f), None)))(ts, yp, command, fe)
+        dys = jax.vmap(lambda t, y, u, f: drive._plant(t, y, ((u, f), None)))(
+            ts, yp, command, fe
+        )
         states = yp
     nd = drive.n_dof
     force = jax.vmap(lambda y, u: drive.actuator.force(drive._split(y)[2], u))(yp, command)

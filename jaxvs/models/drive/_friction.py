@@ -90,6 +90,7 @@ class AbstractFriction(eqx.Module):
     def __check_init__(self):
         check_parameters(self)
 
+
     @abc.abstractmethod
     def __call__(self, velocity: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
         """Friction force [N] at `velocity` [m/s], elementwise."""

@@ -163,6 +163,7 @@ class OscillatorChain(eqx.Module):
     def __check_init__(self):
         check_parameters(self)
 
+
     masses: Float[Array, "*batch n"]
     stiffnesses: Float[Array, "*batch spring"]
     dampings: Float[Array, "*batch spring"]

@@ -136,7 +136,9 @@ def from_poles(
 
 def from_dense(A, B, C, D) -> ModalRealisation:
     """Block form of a dense real state space by eigen-decomposition (distinct poles)."""
-    lam, V = jax.lax.linalg.eig(A, compute_left_eigenvectors=False, enable_eigvec_derivs=True)[:2]
+    lam, V = jax.lax.linalg.eig(
+        A, compute_left_eigenvectors=False, enable_eigvec_derivs=True
+    )[:2]
     left = jnp.linalg.solve(V, B.astype(V.dtype))
     right = C.astype(V.dtype) @ V
     return from_poles(lam, right, left, D)

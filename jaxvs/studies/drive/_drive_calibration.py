@@ -56,7 +56,9 @@ def _check_motion(q: np.ndarray, dt: float, min_speed: float) -> None:
         )
 
 
-def drive_residual(criterion: Literal["input", "output"] = "input", *, dt: float) -> EquationError:
+def drive_residual(
+    criterion: Literal["input", "output"] = "input", *, dt: float
+) -> EquationError:
     """The residual of [`calibrate_drive`][] as a `jaxvs.calibration.EquationError`, to
     combine several experiments or criteria in `jaxvs.calibrate` yourself.
 
