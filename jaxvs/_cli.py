@@ -22,7 +22,7 @@ from typing import Any
 
 from . import _interrupt
 from ._files import regular_file
-from ._outdir import ReportFolder, UsageError
+from ._outdir import ReportFolder, UsageError, held, release_all
 from ._version import __version__
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_NOT_IDENTIFIABLE = 0, 1, 2, 3
@@ -507,6 +507,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         return _interrupt.finish(EXIT_INTERRUPTED, "jaxvs: interrupted; nothing was written.")
     _interrupt.begin(args.command)
+    holding = held()
     try:
         _interrupt.stage("checking the options and files")
         if args.command != "check":
@@ -522,6 +523,8 @@ def main(argv: list[str] | None = None) -> int:
         code = _error(debug)
         _interrupt.done()
         return code
+    finally:
+        release_all(since=holding)
 
 
 def _error(debug: bool) -> int:

@@ -63,6 +63,7 @@ class _State:
         self.out_existed = False
         self.committed = False
         self.staging: list[Path] = []  # removed on interrupt
+        self.locks: list[Path] = []  # lock files of report folders, removed at the end
         self.grace = GRACE_S
 
 
@@ -198,9 +199,17 @@ def set_grace(seconds: float) -> None:
     _state.grace = float(seconds)
 
 
-def report_folder(out: Path, existed: bool, staging: Path) -> None:
+def report_folder(out: Path, existed: bool, staging: Path, lock: Path | None = None) -> None:
     _state.out, _state.out_existed = out, existed
     _state.staging.append(staging)
+    if lock is not None:
+        _state.locks.append(lock)
+
+
+def lock_released(lock: Path) -> None:
+    """A report folder's lock was given back: its file is no longer this process's."""
+    with contextlib.suppress(ValueError):
+        _state.locks.remove(lock)
 
 
 def committed() -> None:
@@ -245,6 +254,9 @@ def line(command: str | None = None, stage: str | None = None) -> str:
 
 
 def _discard(state: _State) -> None:
+    for lock in state.locks:  # the process ends: its locks go with it
+        with contextlib.suppress(OSError):
+            os.unlink(lock)
     if state.committed:
         return
     for path in state.staging:

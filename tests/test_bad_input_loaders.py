@@ -607,12 +607,27 @@ def _loop(tmp: Path) -> Path:
 
 
 _SPECIAL = [
-    ("fifo", "a named pipe (FIFO) given as the file", _fifo, ValueError,
-     r"named pipe \(FIFO\), not a regular file.*save the data to a file"),
-    ("device", "/dev/zero given as the file", lambda tmp: Path("/dev/zero"), ValueError,
-     r"is a device, not a regular file.*save the data to a file"),
-    ("link-loop", "a symbolic link that points to itself", _loop, ValueError,
-     r"symbolic link loop.*give the path of the real file"),
+    (
+        "fifo",
+        "a named pipe (FIFO) given as the file",
+        _fifo,
+        ValueError,
+        r"named pipe \(FIFO\), not a regular file.*save the data to a file",
+    ),
+    (
+        "device",
+        "/dev/zero given as the file",
+        lambda tmp: Path("/dev/zero"),
+        ValueError,
+        r"is a device, not a regular file.*save the data to a file",
+    ),
+    (
+        "link-loop",
+        "a symbolic link that points to itself",
+        _loop,
+        ValueError,
+        r"symbolic link loop.*give the path of the real file",
+    ),
 ]
 
 
@@ -631,19 +646,34 @@ def _special_case(kind, text, make, exc, match, loader) -> Case:
 
 CASES += [_special_case(*row, f) for row in _SPECIAL for f in _ALL_LOADERS]
 
+
 def _scope_head() -> bytes:
     # the header of a TwinCAT Scope export, written here (no shared data needed)
     rows = [
-        "Name;probe;", "File;C:\\probe.csv;",
+        "Name;probe;",
+        "File;C:\\probe.csv;",
         "Starttime of export;132959733843760000;Montag, 2. Mai 2022;15:56:24.376",
-        "Endtime of export;132959733843850000;Montag, 2. Mai 2022;15:56:24.385", "", "",
-        "Name;x;Name;y", "SymbolComment;;SymbolComment;", "Data-Type;REAL64;Data-Type;INT16",
-        "SampleTime[ms];1;SampleTime[ms];1", "VariableSize;8;VariableSize;2",
-        "SymbolBased;True;SymbolBased;True", "IndexGroup;1;IndexGroup;1",
-        "IndexOffset;0;IndexOffset;8", "SymbolName;MAIN.x;SymbolName;MAIN.y",
-        "NetID;1.1.1.1.1.1;NetID;1.1.1.1.1.1", "Port;851;Port;851", "Offset;0;Offset;0",
-        "ScaleFactor;1;ScaleFactor;1", "BitMask;0xff;BitMask;0xff", "Unit;(None);Unit;(None)",
-        "Unit ScaleFactor;1;Unit ScaleFactor;1", "Unit Offset;0;Unit Offset;0", "",
+        "Endtime of export;132959733843850000;Montag, 2. Mai 2022;15:56:24.385",
+        "",
+        "",
+        "Name;x;Name;y",
+        "SymbolComment;;SymbolComment;",
+        "Data-Type;REAL64;Data-Type;INT16",
+        "SampleTime[ms];1;SampleTime[ms];1",
+        "VariableSize;8;VariableSize;2",
+        "SymbolBased;True;SymbolBased;True",
+        "IndexGroup;1;IndexGroup;1",
+        "IndexOffset;0;IndexOffset;8",
+        "SymbolName;MAIN.x;SymbolName;MAIN.y",
+        "NetID;1.1.1.1.1.1;NetID;1.1.1.1.1.1",
+        "Port;851;Port;851",
+        "Offset;0;Offset;0",
+        "ScaleFactor;1;ScaleFactor;1",
+        "BitMask;0xff;BitMask;0xff",
+        "Unit;(None);Unit;(None)",
+        "Unit ScaleFactor;1;Unit ScaleFactor;1",
+        "Unit Offset;0;Unit Offset;0",
+        "",
     ]
     return ("\r\n".join(rows) + "\r\n").encode()
 

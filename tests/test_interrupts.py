@@ -206,6 +206,8 @@ def test_an_earlier_report_is_kept_until_the_new_one_is_complete(files, tmp_path
     old.mkdir()
     (old / "report.json").write_text('{"old": true}')
     (old / "report.md").write_text("old")
+    marker = {"written_by": "jaxvs", "files": ["report.json", "report.md"]}
+    (old / ".jaxvs-report").write_text(json.dumps(marker))  # an earlier report of jaxvs
     proc = _start(CHECK, cwd, pause="writing the report:30")
     _wait_stage(proc, cwd, "writing the report")
     said, _ = _interrupt(proc)
