@@ -20,7 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from . import _interrupt
+from . import _interrupt, _memory
 from ._files import regular_file
 from ._outdir import ReportFolder, UsageError, held, release_all
 from ._version import __version__
@@ -63,6 +63,15 @@ def _float_in(lo: float, hi: float, what: str) -> Callable[[str], float]:
 
 _positive_float = _float_in(0.0, float("inf"), "a positive finite number")
 _fraction = _float_in(0.0, 1.0, "a number in (0, 1) such as 0.3")
+
+
+def _size(text: str) -> float:
+    try:
+        return _memory.parse_size(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expects a memory size such as 8G, 512M or 2.5GB, got {text!r}"
+        ) from None
 
 
 def _character(text: str) -> str:
@@ -112,8 +121,18 @@ _OPTIONS: dict[str, tuple[tuple[str, ...], dict[str, Any]]] = {
         dict(default="utf-8", help="CSV text encoding (default utf-8; e.g. latin-1)"),
     ),
     "debug": (("--debug",), dict(action="store_true", help="show tracebacks of errors")),
+    "max_memory": (
+        ("--max-memory",),
+        dict(
+            type=_size,
+            default=None,
+            metavar="SIZE",
+            help="refuse a run estimated to need more memory (e.g. 8G; default: 80%% of "
+            "the memory available)",
+        ),
+    ),
 }
-_READS_DATA = ("delimiter", "decimal", "encoding", "debug")
+_READS_DATA = ("delimiter", "decimal", "encoding", "max_memory", "debug")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -512,7 +531,8 @@ def main(argv: list[str] | None = None) -> int:
         _interrupt.stage("checking the options and files")
         if args.command != "check":
             _compilation_cache()
-        code = _COMMANDS[args.command](args)
+        with _memory.limit(getattr(args, "max_memory", None)):
+            code = _COMMANDS[args.command](args)
         _interrupt.done()
         return code
     except KeyboardInterrupt:

@@ -27,7 +27,7 @@ from ._loaders import (
     save_mat as save_mat,
     save_npz as save_npz,
 )
-from ._quality import signal_quality as signal_quality
+from ._quality import check_validation as check_validation, signal_quality as signal_quality
 from ._record import DEFAULT_TIME_RTOL as DEFAULT_TIME_RTOL, Record as Record
 from ._sinumerik import (
     SINUMERIK_ALPHABET as SINUMERIK_ALPHABET,
