@@ -439,6 +439,29 @@ _CSV_DEFECTS: list[tuple] = [
      ValueError, r"does not fit in float64.*give dt and t0 in seconds"),
     ("time-rtol-zero", "time_rtol=0", _csv_text(_GOOD_ROWS), {"time_rtol": 0.0}, ValueError,
      r"time_rtol must be a positive number"),
+    ("two-runs-concatenated", "two runs one after the other (time restarting at 0)",
+     _csv_text(_GOOD_ROWS + _GOOD_ROWS), {}, ValueError,
+     r"restarts at sample 40.*holds 2 runs.*Split it into one record per run.*do not sort"),
+    ("coarse-time-stamps", "a 5 kHz time column printed with 3 decimals",
+     _csv_text([f"{k * 2e-4:.3f},{float(q)!r},{float(u)!r}" for k, (q, u) in
+                enumerate(zip(Q, U))]), {},
+     ValueError, r"repeats \d+ of its 40 stamps.*too few decimals.*Pass the sampling period "
+     r"instead of the time column \(dt=.*do not drop the repeated stamps"),
+    ("units-row", "a units row (s, m, N) under the header",
+     _csv_text(["s,m,N", *_GOOD_ROWS], "t,q,u"), {}, ValueError,
+     r"line 2 holds units \('s', 'm', 'N'\).*move them into the header as 't \[s\]', "
+     r"'q \[m\]', 'u \[N\]'"),
+    ("excel-sep-line", "Excel's 'sep=;' first line, ;-separated",
+     "sep=;\n" + _csv_text([r.replace(",", ";") for r in _GOOD_ROWS], "t [s];q [m];u [N]"),
+     {}, None, "", _check_record({"q": Q, "u": U})),
+    ("excel-sep-line-other-delimiter", "'sep=;' first line but delimiter='\\t' given",
+     "sep=;\n" + _csv_text([r.replace(",", ";") for r in _GOOD_ROWS], "t;q;u"),
+     {"delimiter": "\t"}, ValueError, r"names its separator \('sep=;'\).*pass delimiter=';'"),
+    ("thousands-separators", "force values with thousands separators (1,234.5) in a ;-file",
+     _csv_text([f"{float(t)!r};1,{234 + k}.5;1.0" for k, t in enumerate(T)], "t;q;u"),
+     {"delimiter": ";"}, ValueError,
+     r"cell '1,234\.5' is not a number; it looks like a number with thousands separators.*"
+     r"export the numbers without grouping"),
 ]
 # fmt: on
 
@@ -731,8 +754,34 @@ def _tdms_huge_segment(tmp: Path) -> Path:
     return path
 
 
+def _utf16(tmp: Path) -> Path:
+    path = tmp / "unicode.csv"
+    path.write_bytes(_csv_text(_GOOD_ROWS).encode("utf-16"))  # with its byte-order mark
+    return path
+
+
+def _tdms_short_channel(tmp: Path) -> Path:
+    from nptdms import ChannelObject, TdmsWriter
+
+    path = tmp / "short.tdms"
+    with TdmsWriter(path) as w:
+        w.write_segment([
+            ChannelObject("g", "q", Q, properties={"wf_increment": DT}),
+            ChannelObject("g", "u", U[:-10], properties={"wf_increment": DT}),
+        ])
+    return path
+
+
 # fmt: off
 CASES += [
+    Case("csv-utf16-unicode-text", "loaders", "jaxvs.data.load",
+         "Excel 'Unicode text' export (UTF-16 with byte-order mark)",
+         lambda tmp: load(_utf16(tmp)), exc=None, check=_check_record({"q": Q, "u": U})),
+    Case("tdms-channel-shorter", "loaders", "jaxvs.check",
+         "TDMS whose force channel u is 10 samples shorter than q, given to check",
+         lambda tmp: __import__("jaxvs").check(str(_tdms_short_channel(tmp)), family="drive"),
+         match=r"in 'short\.tdms' the channel '[qu]' has \d+ samples but \['[qu]'\] have \d+ "
+               r"\(a channel shorter than the others.*cut the channels to a common length"),
     Case("scope-cut-after-header", "loaders", "jaxvs.data.load_twincat_scope",
          "TwinCAT Scope export cut right after its header (no data row)",
          lambda tmp: load_twincat_scope(_scope_cut(tmp)),

@@ -61,6 +61,22 @@ def _check_signals(
 ) -> None:
     for rec, name in recs:
         missing = [s for s in fam.required if s not in rec.names]
+        base = name.split("[")[0]
+        apart = [  # the file holds it, in a record of another length (a channel cut short)
+            (s, other, n2)
+            for s in missing
+            for other, n2 in recs
+            if n2 != name and n2.split("[")[0] == base and s in other.names
+        ]
+        if apart:
+            s, other, n2 = apart[0]
+            raise ValueError(
+                f"{who}(family={fam.name!r}): in {base!r} the channel {s!r} has {len(other)} "
+                f"samples but {list(rec.names)} have {len(rec)} (a channel shorter than the "
+                "others, so the file was read as separate records); cut the channels to a "
+                f"common length (Record.slice(0, {min(len(other), len(rec))})) and merge them, "
+                "or export the recording again with all channels complete."
+            )
         if missing:
             raise ValueError(
                 f"{who}(family={fam.name!r}): experiment {name!r} lacks the required "
