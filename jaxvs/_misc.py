@@ -95,7 +95,7 @@ def check_physical(x: Any, what: str, *, strict: bool = True, unit: str = "") ->
     if value is None:
         return x
     value = np.asarray(value, float)
-    bad = ~(value > 0) if strict else ~(value >= 0)
+    bad = value <= 0 if strict else value < 0  # NaN: left to the finite-value check
     if not bad.any():
         return x
     got = float(value[bad].flat[0]) if value.ndim else float(value)

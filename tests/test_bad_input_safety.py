@@ -112,6 +112,25 @@ CASES: list[Case] = [
              else pytest.fail(f"loaded {back}"))),
 ]
 
+# --- the physical-range rule of the model constructors -----------------------------------------
+
+M = jaxvs.models
+_MOTOR = dict(inductance=1e-3, torque_constant=0.1, back_emf_constant=0.1, inertia=1e-4)
+CASES += [
+    Case(f"model-{ident}", "models", f"jaxvs.models.{ident.split('-')[0]}", text, run,
+         match=match + r".*cannot be negative.*Give its magnitude")
+    for ident, text, run, match in [
+        ("ViscousFriction-negative", "ViscousFriction(-200)",
+         lambda tmp: M.ViscousFriction(-200.0), r"ViscousFriction: Fv must be >= 0 N·s/m"),
+        ("CoulombFriction-negative", "CoulombFriction(-20)",
+         lambda tmp: M.CoulombFriction(-20.0), r"CoulombFriction: Fc must be >= 0 N"),
+        ("DCMotor-negative-resistance", "DCMotor(resistance=-1, ...)",
+         lambda tmp: M.DCMotor(-1.0, **_MOTOR), r"DCMotor: resistance must be > 0 Ω"),
+        ("FirstOrder-negative-T1", "FirstOrder(20, 5, T1=-300)",
+         lambda tmp: M.FirstOrder(20.0, 5.0, -300.0), r"FirstOrder: T1 must be > 0 s"),
+    ]
+]
+
 # --- options of diagnose and check ------------------------------------------------------------
 
 
@@ -283,5 +302,5 @@ def test_bad_input(case, tmp_path):
 
 def test_rows_cover_every_class():
     areas = {c.area for c in CASES}
-    assert {"modelfiles", "check", "cli"} <= areas
+    assert {"modelfiles", "models", "check", "cli"} <= areas
     assert len(CASES) >= 40

@@ -140,7 +140,6 @@ FORBIDDEN = {
     "time_delay_network": [],
     "virtual_sensor": [],
     "drive_axis": [
-        (lambda: _drive(mass=-95.0), r"RigidAxis: mass must be > 0 kg"),
         (lambda: _drive(M.ViscousFriction(-200.0)), r"ViscousFriction: Fv must be >= 0"),
         (lambda: _drive(M.CoulombFriction(-20.0)), r"CoulombFriction: Fc must be >= 0 N"),
         (lambda: M.CoulombViscousFriction(10.0, -1.0), r"CoulombViscousFriction: Fv must be"),

@@ -102,7 +102,7 @@ def _explain_time_defect(time: np.ndarray, steps: np.ndarray, index: int) -> Non
             "run); do not sort the samples, which would interleave the runs."
         )
     repeats = int(np.sum(steps == 0))
-    if repeats and repeats >= 0.1 * (n - 1) and not np.any(steps < 0):
+    if repeats >= max(3, 0.1 * (n - 1)) and not np.any(steps < 0):
         dt = float((time[-1] - time[0]) / (n - 1))
         quantum = float(np.min(positive)) if positive.size else 0.0
         raise ValueError(

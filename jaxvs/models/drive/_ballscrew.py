@@ -23,7 +23,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ..._misc import as_real, check_physical
+from ..._misc import as_real
 from .._base import check_parameters
 from ..lti import NormalModes, normal_modes
 from ._friction import AbstractFriction, NoFriction, dead_zone
@@ -91,7 +91,6 @@ class RigidAxis(AbstractMechanics):
     friction: AbstractFriction
 
     def __init__(self, mass: ArrayLike, friction: AbstractFriction | None = None):
-        check_physical(mass, "RigidAxis: mass", unit="kg")
         m = as_real(mass, "RigidAxis: mass")
         self.mass = eqx.error_if(m, ~(m > 0), "RigidAxis: mass must be > 0 kg.")
         self.friction = _friction(friction, "RigidAxis")
