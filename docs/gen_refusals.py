@@ -49,6 +49,7 @@ AREAS = {
     "models": "Model constructors",
     "simulate": "Simulation",
     "calibration": "Calibration and fitting",
+    "modelfiles": "Model files",
     "check": "Checks and design",
     "cli": "Command line",
 }

@@ -20,8 +20,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from . import _interrupt
-from ._outdir import ReportFolder, UsageError
+from . import _interrupt, _memory
+from ._files import regular_file
+from ._outdir import ReportFolder, UsageError, held, release_all
 from ._version import __version__
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_NOT_IDENTIFIABLE = 0, 1, 2, 3
@@ -62,6 +63,15 @@ def _float_in(lo: float, hi: float, what: str) -> Callable[[str], float]:
 
 _positive_float = _float_in(0.0, float("inf"), "a positive finite number")
 _fraction = _float_in(0.0, 1.0, "a number in (0, 1) such as 0.3")
+
+
+def _size(text: str) -> float:
+    try:
+        return _memory.parse_size(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expects a memory size such as 8G, 512M or 2.5GB, got {text!r}"
+        ) from None
 
 
 def _character(text: str) -> str:
@@ -125,8 +135,18 @@ _OPTIONS: dict[str, tuple[tuple[str, ...], dict[str, Any]]] = {
         dict(default=None, metavar="COLUMN", help="the time column [s] when it is not named t"),
     ),
     "debug": (("--debug",), dict(action="store_true", help="show tracebacks of errors")),
+    "max_memory": (
+        ("--max-memory",),
+        dict(
+            type=_size,
+            default=None,
+            metavar="SIZE",
+            help="refuse a run estimated to need more memory (e.g. 8G; default: 80%% of "
+            "the memory available)",
+        ),
+    ),
 }
-_READS_DATA = ("signal", "time", "delimiter", "decimal", "encoding", "debug")
+_READS_DATA = ("signal", "time", "delimiter", "decimal", "encoding", "max_memory", "debug")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -240,7 +260,7 @@ def _input_files(paths: list[str], option: str) -> list[str]:
     """Every input path exists, is a file and can be read; else a one-line user error."""
     for text in paths:
         path = Path(text)
-        if not path.exists():
+        if not path.exists() and not path.is_symlink():
             near = (
                 sorted(p.name for p in path.parent.glob(f"*{path.suffix}"))[:3]
                 if (path.parent.is_dir())
@@ -252,6 +272,11 @@ def _input_files(paths: list[str], option: str) -> list[str]:
             raise UsageError(
                 f"{option} {text} is a folder; give the data file(s) in it, e.g. {text}/*.csv."
             )
+        try:  # a FIFO or a device would block the read below; a link loop is named
+            regular_file(path, option)
+        except (ValueError, OSError) as err:
+            said = _one_line(err).removeprefix(f"{option}: ")
+            raise UsageError(f"{option} {text}: {said}") from None
         try:
             with open(path, "rb") as handle:
                 head = handle.read(1)
@@ -541,11 +566,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         return _interrupt.finish(EXIT_INTERRUPTED, "jaxvs: interrupted; nothing was written.")
     _interrupt.begin(args.command)
+    holding = held()
     try:
         _interrupt.stage("checking the options and files")
         if args.command != "check":
             _compilation_cache()
-        code = _COMMANDS[args.command](args)
+        with _memory.limit(getattr(args, "max_memory", None)):
+            code = _COMMANDS[args.command](args)
         _interrupt.done()
         return code
     except KeyboardInterrupt:
@@ -556,6 +583,8 @@ def main(argv: list[str] | None = None) -> int:
         code = _error(debug)
         _interrupt.done()
         return code
+    finally:
+        release_all(since=holding)
 
 
 def _error(debug: bool) -> int:

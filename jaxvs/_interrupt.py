@@ -17,6 +17,11 @@ How an interrupt ends the command:
    watcher thread is woken by the signal itself (`signal.set_wakeup_fd`) and, when the
    main thread has not finished within a grace period (a few seconds), does step 1 itself.
 3. A second Ctrl-C ends the command at once, the same way.
+4. SIGTERM (`kill`, a job scheduler, a container stopping) ends the command at once the
+   same way with exit code 143 and a line saying "terminated": the staging folder is
+   removed, a report being renamed into place is finished first (so `--out` holds the
+   complete report or the earlier one), and the watcher ends it when the main thread is
+   inside XLA.
 
 Only the standard library is imported here: this runs before JAX is loaded.
 """
@@ -38,6 +43,8 @@ from pathlib import Path
 __all__ = ["install", "install_for_command"]
 
 EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143  # 128 + SIGTERM
+TERM_GRACE_S = 1.0  # heuristic: the main thread's own handler usually acts within this
 GRACE_S = 4.0  # heuristic: long enough to clean up and print, short enough to feel instant
 
 
@@ -50,6 +57,7 @@ class _State:
         self.deferring = 0
         self.pending = False
         self.finished = False
+        self.terminated = False
         self.lock = threading.RLock()
         self.echo_lock = threading.Lock()
         self.echo_handler = 0  # re-delivered interrupts (see _unraisable), not new Ctrl-Cs
@@ -63,6 +71,7 @@ class _State:
         self.out_existed = False
         self.committed = False
         self.staging: list[Path] = []  # removed on interrupt
+        self.locks: list[Path] = []  # lock files of report folders, removed at the end
         self.grace = GRACE_S
 
 
@@ -105,6 +114,7 @@ def install() -> None:
     state.installed = True
     state._sockets = (reader, writer)  # type: ignore[attr-defined] # keep them open
     signal.signal(signal.SIGINT, _on_sigint)
+    signal.signal(signal.SIGTERM, _on_sigterm)
     state._unraisable = sys.unraisablehook  # type: ignore[attr-defined]
     sys.unraisablehook = _unraisable
     threading.Thread(target=_watch, args=(state, reader), name="jaxvs-sigint", daemon=True).start()
@@ -138,15 +148,34 @@ def _on_sigint(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
+def _on_sigterm(signum, frame) -> None:
+    state = _state
+    if state.finished:
+        return
+    state.terminated = True
+    if state.deferring:  # renaming a report into place: finish that first
+        state.pending = True
+        return
+    abort()
+
+
 def _watch(state: _State, reader: socket.socket) -> None:
     deadline = None
+    term_deadline = None
     while True:
-        reader.settimeout(None if deadline is None else 0.05)
+        waits = [d for d in (deadline, term_deadline) if d is not None]
+        reader.settimeout(None if not waits else 0.05)
         try:
             data = reader.recv(64)
         except TimeoutError:
             data = b""
         except OSError:  # pragma: no cover - socket closed at exit
+            return
+        if data.count(bytes([signal.SIGTERM])) and term_deadline is None:
+            term_deadline = time.monotonic() + TERM_GRACE_S
+        if term_deadline is not None and time.monotonic() > term_deadline:
+            state.terminated = True
+            abort()  # the main thread is inside XLA: end it from here
             return
         n = data.count(bytes([signal.SIGINT]))
         with state.echo_lock:
@@ -198,9 +227,17 @@ def set_grace(seconds: float) -> None:
     _state.grace = float(seconds)
 
 
-def report_folder(out: Path, existed: bool, staging: Path) -> None:
+def report_folder(out: Path, existed: bool, staging: Path, lock: Path | None = None) -> None:
     _state.out, _state.out_existed = out, existed
     _state.staging.append(staging)
+    if lock is not None:
+        _state.locks.append(lock)
+
+
+def lock_released(lock: Path) -> None:
+    """A report folder's lock was given back: its file is no longer this process's."""
+    with contextlib.suppress(ValueError):
+        _state.locks.remove(lock)
 
 
 def committed() -> None:
@@ -226,6 +263,7 @@ def deferred() -> Iterator[None]:
 def line(command: str | None = None, stage: str | None = None) -> str:
     """The one line printed on an interrupt: what was and was not written."""
     state = _state
+    verb = "terminated (SIGTERM)" if state.terminated else "interrupted"
     cmd = command or state.command
     if (
         cmd == "jaxvs"
@@ -234,7 +272,7 @@ def line(command: str | None = None, stage: str | None = None) -> str:
     ):
         cmd = sys.argv[1]  # interrupted while starting, before main() parsed the command
     during = stage or state.stage
-    head = f"jaxvs {cmd}: interrupted while {during}" if cmd != "jaxvs" else "jaxvs: interrupted"
+    head = f"jaxvs {cmd}: {verb} while {during}" if cmd != "jaxvs" else f"jaxvs: {verb}"
     if state.committed and state.out is not None:
         return f"{head}; the complete report was written to {state.out}."
     if state.out is None:
@@ -245,6 +283,9 @@ def line(command: str | None = None, stage: str | None = None) -> str:
 
 
 def _discard(state: _State) -> None:
+    for lock in state.locks:  # the process ends: its locks go with it
+        with contextlib.suppress(OSError):
+            os.unlink(lock)
     if state.committed:
         return
     for path in state.staging:
@@ -286,6 +327,9 @@ def abort(message: str | None = None) -> None:
 
 
 def _exit(message: str, code: int) -> None:
+    if _state.terminated:  # SIGTERM decides the code and the word, whatever came first
+        code = EXIT_TERMINATED
+        message = message.replace("interrupted", "terminated (SIGTERM)", 1)
     with contextlib.suppress(Exception):
         sys.stdout.flush()
     with contextlib.suppress(Exception):

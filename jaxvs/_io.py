@@ -21,10 +21,10 @@ writes the parameter table and the covariance with round-trip-exact decimal numb
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import datetime
-import importlib
 import io
 import json
 import math
@@ -40,6 +40,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._files import regular_file
 from ._version import __version__
 
 __all__ = [
@@ -60,18 +61,25 @@ _MAGIC = b"JAXVS-MODEL\n"
 _EQX_SUFFIXES = (".eqx", ".jaxvs")
 _H5_SUFFIXES = (".h5", ".hdf5")
 
-# Modules whose classes and functions a file may name even before the user imported them.
-_TRUSTED_PACKAGES = (
-    "jaxvs",
-    "equinox",
-    "jax",
-    "jaxlib",
-    "optimistix",
-    "optax",
-    "diffrax",
-    "lineax",
-    "numpy",
-    "builtins",
+# The safe model format: a file names classes and functions only by text, and loading
+# resolves that text against two registries, never by importing or walking arbitrary names:
+# - classes: dataclasses (eqx.Modules) defined in the packages below, named by the module
+#   that defines them (re-exports and attribute paths through other objects are refused);
+#   they are rebuilt without calling any method;
+# - functions: the activation and elementwise functions below (`_SAFE_FUNCTIONS`);
+# - types: those classes and the scalar types of Python and NumPy.
+# Anything else (`os:system`, `subprocess:run`, `builtins:eval`, a user's function) is
+# refused before anything is called; a user's own classes load with `like=`.
+_MODEL_PACKAGES = ("jaxvs", "equinox", "diffrax", "lineax", "optimistix")
+_SCALAR_TYPES = (bool, int, float, complex, str)
+_JAX_NN = (
+    "celu elu gelu glu hard_sigmoid hard_silu hard_swish hard_tanh identity leaky_relu "
+    "log_sigmoid log_softmax logsumexp mish relu relu6 selu sigmoid silu soft_sign softmax "
+    "softplus sparse_plus sparse_sigmoid squareplus standardize swish tanh"
+)
+_JAX_NUMPY = (
+    "abs absolute arctan arctanh cbrt cos cosh exp exp2 expm1 log log10 log1p log2 "
+    "logaddexp negative sign sin sinc sinh sqrt square tan tanh"
 )
 
 
@@ -157,26 +165,101 @@ class _Encoder:
 
 
 def _resolves(obj: Any) -> bool:
+    """Whether the safe format can name `obj` (a function of the registry)."""
     try:
-        return _resolve(_ref(obj), check_trust=False) is obj
+        return _safe_functions().get(_ref(obj)) is obj
     except Exception:
         return False
 
 
-def _resolve(ref: str, *, check_trust: bool = True) -> Any:
-    module_name, _, qualname = ref.partition(":")
-    if module_name not in sys.modules:
-        if check_trust and module_name.split(".")[0] not in _TRUSTED_PACKAGES:
-            raise IncompatibleFileError(
-                f"load_model: the file refers to {ref}, whose module {module_name!r} is not "
-                f"imported. Import it first (import {module_name}) if you trust the file, "
-                "then load again."
-            )
-        importlib.import_module(module_name)
-    obj: Any = sys.modules[module_name]
+_FUNCTIONS: dict[str, Any] = {}
+
+
+def _safe_functions() -> dict[str, Any]:
+    """The functions a model file may name: `module:qualname` -> the function."""
+    if not _FUNCTIONS:
+        for namespace, names in ((jax.nn, _JAX_NN), (jnp, _JAX_NUMPY)):
+            for name in names.split():
+                fn = getattr(namespace, name, None)
+                if fn is not None:
+                    with contextlib.suppress(AttributeError):
+                        _FUNCTIONS[_ref(fn)] = fn
+    return _FUNCTIONS
+
+
+def _refused(ref: Any, what: str) -> IncompatibleFileError:
+    return IncompatibleFileError(
+        f"load_model: the file names {what} {ref!r}, which is not a jaxvs model {what}; a "
+        "model file may only name the classes of jaxvs, equinox, diffrax, lineax and "
+        "optimistix and the activation functions of jax.nn / elementwise functions of "
+        "jax.numpy, so the file was edited or not written by jaxvs.save_model. Nothing of it "
+        "was run. If you trust it and it holds your own classes, load it with "
+        "like=<an object of the same structure>."
+    )
+
+
+def _split_ref(ref: Any, what: str) -> tuple[str, str]:
+    if not isinstance(ref, str) or ref.count(":") != 1:
+        raise _refused(ref, what)
+    module_name, qualname = ref.split(":")
+    parts = [*module_name.split("."), *qualname.split(".")]
+    if not all(p.isidentifier() and not p.startswith("__") for p in parts):
+        raise _refused(ref, what)
+    return module_name, qualname
+
+
+def _resolve_class(ref: Any, what: str = "class") -> type:
+    """A class defined in one of `_MODEL_PACKAGES`, named by the module that defines it (a
+    dataclass, as it is rebuilt field by field, unless it is only named as a type)."""
+    module_name, qualname = _split_ref(ref, what)
+    if module_name.split(".")[0] not in _MODEL_PACKAGES:
+        raise _refused(ref, what)
+    # never imported on the file's word: jaxvs and the packages it builds on are loaded
+    module = sys.modules.get(module_name)
+    if module is None:
+        raise IncompatibleFileError(
+            f"load_model: the file names the class {ref}, whose module is not part of this "
+            "installation (nothing of it was run); it was written by another version of the "
+            "package or edited. Load it with the version that wrote it "
+            "(load_header(path)['jaxvs_version']) or re-run the calibration."
+        )
+    obj: Any = module
     for part in qualname.split("."):
-        obj = getattr(obj, part)
+        obj = vars(obj).get(part) if isinstance(obj, type | types.ModuleType) else None
+        if obj is None:
+            raise IncompatibleFileError(
+                f"load_model: {ref} is not a class of this installation (nothing of it was "
+                "run); the file was written against another version of it. Load it with "
+                "the version that wrote it (load_header(path)['jaxvs_version']) or re-run "
+                "the calibration."
+            )
+    if not (
+        isinstance(obj, type)
+        and (what == "type" or dataclasses.is_dataclass(obj))
+        and obj.__module__ == module_name
+        and obj.__qualname__ == qualname
+    ):
+        raise _refused(ref, what)
     return obj
+
+
+def _resolve_type(ref: Any) -> type:
+    for scalar in _SCALAR_TYPES:
+        if ref == _ref(scalar):
+            return scalar
+    if isinstance(ref, str) and ref.startswith("numpy:"):
+        name = ref.partition(":")[2]
+        obj = getattr(np, name, None) if name.isidentifier() else None
+        if isinstance(obj, type) and issubclass(obj, np.generic) and _ref(obj) == ref:
+            return obj
+    return _resolve_class(ref, "type")
+
+
+def _resolve_function(ref: Any) -> Any:
+    fn = _safe_functions().get(ref) if isinstance(ref, str) else None
+    if fn is None:
+        raise _refused(ref, "function")
+    return fn
 
 
 class _Decoder:
@@ -197,10 +280,12 @@ class _Decoder:
         if "__complex__" in d:
             re, im = (self(v) for v in d["__complex__"])
             return complex(re, im)
+        if not isinstance(d, dict):
+            raise IncompatibleFileError(f"load_model: unknown entry in the header: {d!r}.")
         if "__type__" in d:
-            return _resolve(d["__type__"])
+            return _resolve_type(d["__type__"])
         if "__function__" in d:
-            return _resolve(d["__function__"])
+            return _resolve_function(d["__function__"])
         if "__dict__" in d:
             return {k: self(v) for k, v in d["__dict__"].items()}
         if "__list__" in d:
@@ -208,12 +293,9 @@ class _Decoder:
         if "__tuple__" in d:
             return tuple(self(v) for v in d["__tuple__"])
         if "__class__" in d:
-            cls = _resolve(d["__class__"])
-            if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
-                raise IncompatibleFileError(
-                    f"load_model: {d['__class__']} is not a dataclass or eqx.Module here; the "
-                    "file was written against another version of that class."
-                )
+            cls = _resolve_class(d["__class__"])
+            if not isinstance(d.get("fields"), dict):
+                raise IncompatibleFileError(f"load_model: {d['__class__']} has no fields entry.")
             saved = set(d["fields"])
             current = {f.name for f in dataclasses.fields(cls)}
             if saved != current:
@@ -311,6 +393,38 @@ def _check_header(header: Any, path: Path) -> dict:
             )
         )
     return header
+
+
+def _check_leaves(header: dict, path: Path, size: int) -> None:
+    """The header's array list is well formed, numeric, and its arrays fit in the file (a
+    damaged or crafted header cannot make the reader allocate more than the file holds)."""
+    leaves = header.get("leaves")
+    tree = header.get("tree")
+    damaged = f"load_model: {path} has a damaged header"
+    fix = "Write it again with jaxvs.save_model."
+    if not isinstance(leaves, list) or tree is None:
+        raise IncompatibleFileError(f"{damaged} (no array list or tree). {fix}")
+    total = 0
+    for i, leaf in enumerate(leaves):
+        try:
+            dtype = np.dtype(leaf["dtype"])
+            shape = [int(n) for n in leaf["shape"]]
+            ok = (
+                isinstance(leaf["dtype"], str)
+                and dtype.kind in "biufc"
+                and leaf["kind"] in ("jax", "numpy")
+                and all(type(n) is int and n >= 0 for n in leaf["shape"])
+            )
+        except (KeyError, TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise IncompatibleFileError(f"{damaged} (array {i}: {str(leaf)[:80]}). {fix}")
+        total += math.prod(shape) * dtype.itemsize
+    if total > size:
+        raise IncompatibleFileError(
+            f"{damaged}: its arrays would take {total} bytes but the file has {size}; it is "
+            f"truncated or edited. {fix}"
+        )
 
 
 def _check_x64(header: dict, path: Path) -> None:
@@ -451,7 +565,7 @@ def load_header(path: str | os.PathLike) -> dict:
     [`IncompatibleFileError`][jaxvs.IncompatibleFileError] for a file of another kind or
     format version.
     """
-    path = Path(path)
+    path = regular_file(path, "load_header")
     suffix = _suffix(path, "load_header")
     if suffix in _EQX_SUFFIXES:
         with open(path, "rb") as f:
@@ -471,12 +585,17 @@ def _read_eqx_header(f: Any, path: Path) -> tuple[Any, int]:
             f"load_model: {path} is not a jaxvs model file (it does not start with "
             f"{_MAGIC!r}). Write it with jaxvs.save_model."
         )
-    line = f.readline()
+    line = f.readline(24)  # the header's length: a short decimal number
     try:
         n = int(line)
+        if n < 2:
+            raise ValueError(f"header length {n}")
         header = json.loads(f.read(n).decode())
-    except ValueError as e:
-        raise IncompatibleFileError(f"load_model: {path} has a damaged header ({e}).") from e
+    except (ValueError, RecursionError) as e:
+        raise IncompatibleFileError(
+            f"load_model: {path} has a damaged header ({type(e).__name__}: {str(e)[:120]}). "
+            "Write it again with jaxvs.save_model."
+        ) from None
     return header, f.tell()
 
 
@@ -516,19 +635,27 @@ def load_model(path: str | os.PathLike, *, like: Any = None) -> Any:
     changed; `ValueError` when float64 arrays would be loaded with 64-bit JAX disabled, or
     when `like` does not match the saved arrays.
     """
-    path = Path(path)
+    path = regular_file(path, "load_model")
     suffix = _suffix(path, "load_model")
     if suffix in _EQX_SUFFIXES:
         with open(path, "rb") as f:
             header, _ = _read_eqx_header(f, path)
             header = _check_header(header, path)
+            _check_leaves(header, path, os.fstat(f.fileno()).st_size)
             _check_x64(header, path)
-            leaves = eqx.tree_deserialise_leaves(f, _placeholders(header))
+            try:
+                leaves = eqx.tree_deserialise_leaves(f, _placeholders(header))
+            except Exception as e:  # numpy / equinox raise assorted errors on damaged arrays
+                raise IncompatibleFileError(
+                    f"load_model: {path} has damaged arrays ({type(e).__name__}: {e}); it is "
+                    "truncated or edited. Write it again with jaxvs.save_model."
+                ) from None
     else:
         import h5py
 
         with h5py.File(path, "r") as f:
             header = _check_header(_h5_header(f, path), path)
+            _check_leaves(header, path, 2**62)  # HDF5 arrays are sized by h5py itself
             _check_x64(header, path)
             leaves = []
             for i, spec in enumerate(header["leaves"]):
@@ -537,7 +664,17 @@ def load_model(path: str | os.PathLike, *, like: Any = None) -> Any:
                 leaves.append(jnp.asarray(x) if spec["kind"] == "jax" else x)
     if like is not None:
         return _fill_like(like, leaves, path)
-    return _Decoder(leaves)(header["tree"])
+    try:
+        return _Decoder(leaves)(header["tree"])
+    except IncompatibleFileError as e:  # say which file
+        raise IncompatibleFileError(
+            f"load_model: {path}: {str(e).removeprefix('load_model: ')}"
+        ) from None
+    except (KeyError, IndexError, TypeError, AttributeError, RecursionError) as e:
+        raise IncompatibleFileError(
+            f"load_model: {path} has a damaged header ({type(e).__name__}: {str(e)[:120]}). "
+            "Write it again with jaxvs.save_model."
+        ) from None
 
 
 def _fill_like(like: Any, leaves: list[Any], path: Path) -> Any:

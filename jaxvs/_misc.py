@@ -20,6 +20,7 @@ from jaxtyping import Array, Float
 __all__ = [
     "as_real",
     "check_finite",
+    "check_physical",
     "concrete",
     "expm",
     "is_traced",
@@ -83,6 +84,33 @@ def check_finite(x: Any, what: str, fix: str, *, unit: str = "value(s)") -> Any:
             f"{what} has {int(bad.sum())} non-finite {unit}, the first at index {index}. {fix}"
         )
     return x
+
+
+def check_physical(x: Any, what: str, *, strict: bool = True, unit: str = "") -> Any:
+    """The one rule of every model constructor for a physical parameter that cannot be
+    negative (a mass, a friction level, a resistance, a time constant): refuse a value
+    `<= 0` (`strict`) or `< 0` with a `ValueError` naming it, the value and the fix.
+
+    Only values given by the user are checked -- Python numbers, lists and NumPy arrays; a
+    JAX array is a computed value (a fit's trial point, a diagnosis effect's signed
+    parameter, a model built inside `jit`) and passes unchanged: fits judge their results
+    with their own admissibility checks. Returns `x`."""
+    if isinstance(x, jax.Array):
+        return x
+    value = concrete(x)
+    if value is None:
+        return x
+    value = np.asarray(value, float)
+    bad = value <= 0 if strict else value < 0  # NaN: left to the finite-value check
+    if not bad.any():
+        return x
+    got = float(value[bad].flat[0]) if value.ndim else float(value)
+    bound = "> 0" if strict else ">= 0"
+    raise ValueError(
+        f"{what} must be {bound}{' ' + unit if unit else ''} (a physical value that cannot be "
+        f"negative); got {got:g}. Give its magnitude: the direction of a force comes from the "
+        "velocity, and a decay from the model itself."
+    )
 
 
 def require_x64(who: str, why: str) -> None:
@@ -308,4 +336,3 @@ def json_safe(x: Any) -> Any:
     if isinstance(x, np.bool_):
         return bool(x)
     return x
-

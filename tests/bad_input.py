@@ -21,20 +21,55 @@ lines into the docs page "What jaxvs refuses" and the counts in the README.
 CLI rows call `run_cli(args, cwd)`, which runs `python -m jaxvs._cli` in a subprocess and raises
 `CliExit` (carrying the exit code and stderr) when the exit code is not 0, so a CLI refusal is
 matched like any other exception: `exc=CliExit`, `match=` on stderr, `exit_code=2`.
+
+Every row runs under a time bound (`Case.timeout`, seconds): a reader that blocks on a FIFO or
+loops on a hostile file fails its row with `ProbeTimeout` instead of hanging the suite.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["Case", "CliExit", "run_case", "run_cli"]
+__all__ = ["Case", "CliExit", "ProbeTimeout", "run_case", "run_cli", "time_bound"]
+
+
+class ProbeTimeout(BaseException):
+    """A probe ran past its time bound (a hang); a BaseException so no `except Exception`
+    in the code under test swallows it."""
+
+
+@contextlib.contextmanager
+def time_bound(seconds: float) -> Iterator[None]:
+    """Raise `ProbeTimeout` in the block after `seconds` (SIGALRM; main thread only, else
+    the block runs unbounded). Python-level loops and blocking system calls (`open` of a
+    FIFO) are both interrupted."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(
+        signal, "setitimer"
+    ):
+        yield
+        return
+
+    def expire(signum, frame):
+        raise ProbeTimeout(f"did not finish within {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
 
 _REPO = Path(__file__).resolve().parents[1]
 
@@ -62,6 +97,7 @@ class Case:
     match: str = ""
     check: Callable[[object], None] | None = None
     exit_code: int | None = None  # CLI rows: the expected exit code
+    timeout: float = 240.0  # seconds: a hang fails the row (generous for a loaded 2-core CI)
 
 
 def run_cli(args: list[str], cwd: Path, *, timeout: float = 300.0) -> subprocess.CompletedProcess:
@@ -101,6 +137,11 @@ def _record(case: Case, outcome: str, message: str) -> None:
 
 def run_case(case: Case, tmp_path: Path) -> None:
     """Run one row and assert what it promises (and record the outcome when asked)."""
+    with time_bound(case.timeout):
+        _run_case(case, tmp_path)
+
+
+def _run_case(case: Case, tmp_path: Path) -> None:
     if case.exc is None:
         result = case.run(tmp_path)
         if case.check is not None:

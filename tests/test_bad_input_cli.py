@@ -225,7 +225,28 @@ _PER_COMMAND = [
         "a symbolic link to a file that was deleted",
         _symlink,
         None,
-        r"l\.csv: no such file.*check the path",
+        r"l\.csv.*broken symbolic link.*gone\.csv.*give the path of the real file",
+    ),
+    (
+        "fifo",
+        "a named pipe (FIFO) given as data (reading it would block forever)",
+        lambda tmp: (os.mkfifo(tmp / "pipe.csv"), tmp / "pipe.csv")[1],
+        None,
+        r"pipe\.csv.*named pipe \(FIFO\), not a regular file.*save the data to a file",
+    ),
+    (
+        "device",
+        "/dev/zero given as data",
+        lambda tmp: "/dev/zero",
+        None,
+        r"/dev/zero.*is a device, not a regular file.*save the data to a file",
+    ),
+    (
+        "symlink-loop",
+        "a symbolic link that points to itself",
+        lambda tmp: ((tmp / "loop.csv").symlink_to("loop.csv"), tmp / "loop.csv")[1],
+        None,
+        r"loop\.csv.*symbolic link loop.*give the path of the real file",
     ),
     (
         "out-is-file",
@@ -253,14 +274,15 @@ _PER_COMMAND = [
         "--out naming a non-empty folder that holds no jaxvs report",
         drive_csv,
         lambda tmp: _mkdir(tmp, "mine", file="notes.txt"),
-        r"folder with other files \(notes\.txt\) and no earlier jaxvs report.*or empty it",
+        r"files \(notes\.txt\) that jaxvs did not write \(no \.jaxvs-report marker\).*new "
+        r"folder.*never deletes files it did not write",
     ),
     (
         "out-holds-input",
         "--out naming the folder that holds the data file",
         lambda tmp: drive_csv(_mkdir(tmp, "d")),
         lambda tmp: tmp / "d",
-        r"(holds the input file|no earlier jaxvs report).*new folder",
+        r"(holds the input file|jaxvs did not write).*new folder",
     ),
     (
         "out-empty-string",
@@ -662,7 +684,7 @@ CASES += [
             "--out",
             ((tmp / "m").mkdir(), (tmp / "m" / "a.py").write_text(""), tmp / "m")[2],
         ],
-        r"folder with other files \(a\.py\).*or empty it first",
+        r"folder with files \(a\.py\) that jaxvs did not write.*new folder",
     ),
     refused(
         "demo-positions-1",
@@ -764,11 +786,22 @@ CASES += [
 ]
 
 
+# --- the --out policy: only what jaxvs wrote is replaced ----------------------------------------
+
+
+def _jaxvs_report(tmp: Path, name: str = "o") -> Path:
+    """A report folder written by jaxvs itself (a real `jaxvs check` run)."""
+    run_main(
+        ["check", drive_csv(tmp, "first.csv"), "--family", "drive", "--out", tmp / name],
+        tmp,
+        ok=(0, 3),
+    )
+    return tmp / name
+
+
 def _replaces_old_report(tmp: Path) -> list:
-    old = tmp / "o"
-    old.mkdir()
-    (old / "report.json").write_text("{}")
-    (old / "stale.png").write_text("x")
+    old = _jaxvs_report(tmp)
+    (old / "report.json").write_text("{}")  # jaxvs's own file, changed: still jaxvs's
     return ["check", drive_csv(tmp), "--family", "drive", "--out", old]
 
 
@@ -777,18 +810,167 @@ def _replaced(result) -> None:
     assert code in (0, 3)
     folder = Path(out.strip().splitlines()[-1].split("written: ")[1].split(",")[0]).parent
     assert json.loads((folder / "report.json").read_text())["family"] == "drive"
-    assert not (folder / "stale.png").exists()  # the whole folder was replaced
+    assert (folder / ".jaxvs-report").is_file()  # the marker of the new report
     assert not [p for p in folder.parent.iterdir() if p.name.startswith(".o.")]  # no staging left
 
 
-CASES.append(
+def _untouched(make: Callable[[Path], list], keep: str) -> Callable[[Path], object]:
+    """Run the command; whatever it says, the user's file `keep` is still there, unchanged."""
+
+    def run(tmp: Path) -> object:
+        args = make(tmp)
+        path = tmp / keep
+        before = path.read_bytes() if path.is_file() else os.readlink(path)
+        try:
+            return run_main(args, tmp, strict=False)
+        finally:
+            after = path.read_bytes() if path.is_file() else os.readlink(path)
+            assert after == before, f"{keep} was changed or removed"
+
+    return run
+
+
+def _foreign_report_json(tmp: Path) -> list:
+    folder = _mkdir(tmp, "o", file="keep.txt")
+    (folder / "report.json").write_text("{}")  # a name match is not a jaxvs report
+    return ["check", drive_csv(tmp), "--family", "drive", "--out", folder]
+
+
+def _report_plus_user_file(tmp: Path) -> list:
+    folder = _jaxvs_report(tmp)
+    (folder / "keep.txt").write_text("my notes")
+    return ["check", drive_csv(tmp), "--family", "drive", "--out", folder]
+
+
+def _symlinked_out(tmp: Path) -> list:
+    real = _jaxvs_report(tmp, "real")
+    (tmp / "o").symlink_to(real)
+    return ["check", drive_csv(tmp), "--family", "drive", "--out", tmp / "o"]
+
+
+def _locked_out(tmp: Path) -> list:
+    from jaxvs._outdir import ReportFolder
+
+    old = os.getcwd()
+    os.chdir(tmp)
+    try:
+        holder = ReportFolder(tmp / "o")  # another run holds --out o
+    finally:
+        os.chdir(old)
+    _HOLDERS.append(holder)
+    return ["check", drive_csv(tmp), "--family", "drive", "--out", tmp / "o"]
+
+
+_HOLDERS: list = []
+
+
+def _with_holder_released(make):
+    def run(tmp: Path) -> object:
+        try:
+            return run_main(make(tmp), tmp)
+        finally:
+            while _HOLDERS:
+                _HOLDERS.pop().release()
+
+    return run
+
+
+def _dead_pid() -> int:
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def _stale_partials(tmp: Path) -> list:
+    dead = tmp / f".o.partial-{_dead_pid()}"
+    dead.mkdir()
+    (dead / "report.json").write_text("{")  # a half-written report of a killed run
+    alive = tmp / f".o.partial-{os.getppid()}"  # a live process's: not ours to remove
+    alive.mkdir()
+    return ["check", drive_csv(tmp), "--family", "drive", "--out", tmp / "o"]
+
+
+def _stale_cleaned(result) -> None:
+    code, out, _ = result
+    folder = Path(out.strip().splitlines()[-1].split("written: ")[1].split(",")[0]).parent
+    left = sorted(p.name for p in folder.parent.iterdir() if p.name.startswith(".o."))
+    assert left == [f".o.partial-{os.getppid()}"], left
+
+
+CASES += [
     _legal(
         "check-out-with-older-report",
-        "--out naming a folder that holds an earlier jaxvs report",
+        "--out naming a folder that holds an earlier report written by jaxvs",
         _replaces_old_report,
         _replaced,
-    )
-)
+    ),
+    Case(
+        "check-out-report-json-not-by-jaxvs",
+        "cli",
+        "jaxvs check",
+        "--out naming a folder of the user's that holds a report.json and keep.txt",
+        _untouched(_foreign_report_json, "o/keep.txt"),
+        exc=CliExit,
+        exit_code=2,
+        match=r"files \(keep\.txt, report\.json\) that jaxvs did not write.*new folder",
+    ),
+    Case(
+        "check-out-report-plus-user-file",
+        "cli",
+        "jaxvs check",
+        "--out naming an earlier jaxvs report into which the user put keep.txt",
+        _untouched(_report_plus_user_file, "o/keep.txt"),
+        exc=CliExit,
+        exit_code=2,
+        match=r"earlier jaxvs report and files added since \(keep\.txt\).*move them out",
+    ),
+    Case(
+        "check-out-symlink",
+        "cli",
+        "jaxvs check",
+        "--out naming a symbolic link to a report folder",
+        _untouched(_symlinked_out, "o"),
+        exc=CliExit,
+        exit_code=2,
+        match=r"is a symbolic link \(to .*real\).*name the folder the link points to",
+    ),
+    refused(
+        "check-out-dot",
+        "jaxvs check",
+        "--out . (the current folder)",
+        lambda tmp: ["check", drive_csv(tmp), "--family", "drive", "--out", "."],
+        r"--out \. is the current folder.*give --out the name of a new folder",
+    ),
+    refused(
+        "design-out-dot-dot",
+        "jaxvs design",
+        "--out .. (the parent folder)",
+        lambda tmp: ["design", thermal_csv(tmp), "--target", "T_bearing", "--out", ".."],
+        r"--out \.\. is the current folder, one of its parents.*new folder",
+    ),
+    Case(
+        "check-out-used-by-another-run",
+        "cli",
+        "jaxvs check",
+        "--out naming a folder another jaxvs run is writing",
+        _with_holder_released(_locked_out),
+        exc=CliExit,
+        exit_code=2,
+        match=r"being written by another jaxvs run \(process \d+\).*another folder",
+    ),
+    Case(
+        "check-stale-partial-folders",
+        "cli",
+        "jaxvs check",
+        "--out whose .o.partial-PID folders were left by a killed run (and one of a live process)",
+        cli(_stale_partials, (0, 3)),
+        exc=None,
+        check=_stale_cleaned,
+    ),
+]
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)

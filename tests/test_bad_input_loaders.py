@@ -439,6 +439,29 @@ _CSV_DEFECTS: list[tuple] = [
      ValueError, r"does not fit in float64.*give dt and t0 in seconds"),
     ("time-rtol-zero", "time_rtol=0", _csv_text(_GOOD_ROWS), {"time_rtol": 0.0}, ValueError,
      r"time_rtol must be a positive number"),
+    ("two-runs-concatenated", "two runs one after the other (time restarting at 0)",
+     _csv_text(_GOOD_ROWS + _GOOD_ROWS), {}, ValueError,
+     r"restarts at sample 40.*holds 2 runs.*Split it into one record per run.*do not sort"),
+    ("coarse-time-stamps", "a 5 kHz time column printed with 3 decimals",
+     _csv_text([f"{k * 2e-4:.3f},{float(q)!r},{float(u)!r}" for k, (q, u) in
+                enumerate(zip(Q, U))]), {},
+     ValueError, r"repeats \d+ of its 40 stamps.*too few decimals.*Pass the sampling period "
+     r"instead of the time column \(dt=.*do not drop the repeated stamps"),
+    ("units-row", "a units row (s, m, N) under the header",
+     _csv_text(["s,m,N", *_GOOD_ROWS], "t,q,u"), {}, ValueError,
+     r"line 2 holds units \('s', 'm', 'N'\).*move them into the header as 't \[s\]', "
+     r"'q \[m\]', 'u \[N\]'"),
+    ("excel-sep-line", "Excel's 'sep=;' first line, ;-separated",
+     "sep=;\n" + _csv_text([r.replace(",", ";") for r in _GOOD_ROWS], "t [s];q [m];u [N]"),
+     {}, None, "", _check_record({"q": Q, "u": U})),
+    ("excel-sep-line-other-delimiter", "'sep=;' first line but delimiter='\\t' given",
+     "sep=;\n" + _csv_text([r.replace(",", ";") for r in _GOOD_ROWS], "t;q;u"),
+     {"delimiter": "\t"}, ValueError, r"names its separator \('sep=;'\).*pass delimiter=';'"),
+    ("thousands-separators", "force values with thousands separators (1,234.5) in a ;-file",
+     _csv_text([f"{float(t)!r};1,{234 + k}.5;1.0" for k, t in enumerate(T)], "t;q;u"),
+     {"delimiter": ";"}, ValueError,
+     r"cell '1,234\.5' is not a number; it looks like a number with thousands separators.*"
+     r"export the numbers without grouping"),
 ]
 # fmt: on
 
@@ -581,6 +604,210 @@ CASES += [
     Case("frf-load-frf-csv", "loaders", "jaxvs.data.load_frf", "load_frf of a CSV time record",
          lambda tmp: load_frf(save_csv(_valid_record(), tmp / "r.csv")),
          match=r"(FRF|frequency).*(\.unv|\.uff|\.xml|load\b)"),
+]
+# fmt: on
+
+
+# --- hostile files: nothing blocks, loops or allocates more than the file holds ---------------
+# Every row runs under a short time bound (`Case.timeout`): a FIFO that blocked the reader, or a
+# header loop that never ended, fails the row instead of hanging.
+
+_HOSTILE_S = 30.0
+
+
+def _fifo(tmp: Path) -> Path:
+    import os
+
+    path = tmp / "pipe.csv"
+    os.mkfifo(path)
+    return path
+
+
+def _loop(tmp: Path) -> Path:
+    path = tmp / "loop.csv"
+    path.symlink_to(path.name)  # points at itself
+    return path
+
+
+_SPECIAL = [
+    (
+        "fifo",
+        "a named pipe (FIFO) given as the file",
+        _fifo,
+        ValueError,
+        r"named pipe \(FIFO\), not a regular file.*save the data to a file",
+    ),
+    (
+        "device",
+        "/dev/zero given as the file",
+        lambda tmp: Path("/dev/zero"),
+        ValueError,
+        r"is a device, not a regular file.*save the data to a file",
+    ),
+    (
+        "link-loop",
+        "a symbolic link that points to itself",
+        _loop,
+        ValueError,
+        r"symbolic link loop.*give the path of the real file",
+    ),
+]
+
+
+def _special_case(kind, text, make, exc, match, loader) -> Case:
+    return Case(
+        id=f"{kind}-{loader.__name__}",
+        area="loaders",
+        entry=f"jaxvs.data.{loader.__name__}",
+        input=text,
+        run=lambda tmp: loader(make(tmp)),
+        exc=exc,
+        match=match,
+        timeout=_HOSTILE_S,
+    )
+
+
+CASES += [_special_case(*row, f) for row in _SPECIAL for f in _ALL_LOADERS]
+
+
+def _scope_head() -> bytes:
+    # the header of a TwinCAT Scope export, written here (no shared data needed)
+    rows = [
+        "Name;probe;",
+        "File;C:\\probe.csv;",
+        "Starttime of export;132959733843760000;Montag, 2. Mai 2022;15:56:24.376",
+        "Endtime of export;132959733843850000;Montag, 2. Mai 2022;15:56:24.385",
+        "",
+        "",
+        "Name;x;Name;y",
+        "SymbolComment;;SymbolComment;",
+        "Data-Type;REAL64;Data-Type;INT16",
+        "SampleTime[ms];1;SampleTime[ms];1",
+        "VariableSize;8;VariableSize;2",
+        "SymbolBased;True;SymbolBased;True",
+        "IndexGroup;1;IndexGroup;1",
+        "IndexOffset;0;IndexOffset;8",
+        "SymbolName;MAIN.x;SymbolName;MAIN.y",
+        "NetID;1.1.1.1.1.1;NetID;1.1.1.1.1.1",
+        "Port;851;Port;851",
+        "Offset;0;Offset;0",
+        "ScaleFactor;1;ScaleFactor;1",
+        "BitMask;0xff;BitMask;0xff",
+        "Unit;(None);Unit;(None)",
+        "Unit ScaleFactor;1;Unit ScaleFactor;1",
+        "Unit Offset;0;Unit Offset;0",
+        "",
+    ]
+    return ("\r\n".join(rows) + "\r\n").encode()
+
+
+def _scope_cut(tmp: Path) -> Path:
+    path = tmp / "scope.csv"
+    path.write_bytes(_scope_head())
+    return path
+
+
+def _scope_integers(tmp: Path) -> Path:
+    path = tmp / "scope.csv"
+    rows = "".join(f"{k};{k % 3};{k};{-k}\r\n" for k in range(10))
+    path.write_bytes(_scope_head() + rows.encode())
+    return path
+
+
+def _check_scope_integers(result) -> None:
+    records = result if isinstance(result, list) else [result]
+    (record,) = records
+    np.testing.assert_array_equal(np.asarray(record["x"]), np.arange(10) % 3)
+    np.testing.assert_array_equal(np.asarray(record["y"]), -np.arange(10))
+
+
+def _npz_huge_header(tmp: Path) -> Path:
+    import io
+    import zipfile
+
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, np.zeros(4))
+    raw = buf.getvalue()
+    n = int.from_bytes(raw[8:10], "little")
+    head = "{'descr': '<f8', 'fortran_order': False, 'shape': (4000000000,), }"
+    raw = raw[:10] + (head.ljust(n - 1) + "\n").encode() + raw[10 + n :]
+    path = tmp / "huge.npz"
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("t.npy", raw)
+    return path
+
+
+def _xml_bomb(tmp: Path) -> Path:
+    entities = "".join(
+        f'<!ENTITY e{i} "' + (f"&e{i - 1};" if i > 1 else "ha") * 10 + '">' for i in range(1, 10)
+    )
+    path = tmp / "bomb.xml"
+    path.write_text(f'<?xml version="1.0"?><!DOCTYPE d [{entities}]><d>&e9;</d>')
+    return path
+
+
+def _tdms_huge_segment(tmp: Path) -> Path:
+    import struct
+
+    path = tmp / "huge.tdms"
+    path.write_bytes(b"TDSm" + struct.pack("<IIQQ", 0xE, 4713, 2**60, 2**60) + bytes(64))
+    return path
+
+
+def _utf16(tmp: Path) -> Path:
+    path = tmp / "unicode.csv"
+    path.write_bytes(_csv_text(_GOOD_ROWS).encode("utf-16"))  # with its byte-order mark
+    return path
+
+
+def _tdms_short_channel(tmp: Path) -> Path:
+    from nptdms import ChannelObject, TdmsWriter
+
+    path = tmp / "short.tdms"
+    with TdmsWriter(path) as w:
+        w.write_segment([
+            ChannelObject("g", "q", Q, properties={"wf_increment": DT}),
+            ChannelObject("g", "u", U[:-10], properties={"wf_increment": DT}),
+        ])
+    return path
+
+
+# fmt: off
+CASES += [
+    Case("csv-utf16-unicode-text", "loaders", "jaxvs.data.load",
+         "Excel 'Unicode text' export (UTF-16 with byte-order mark)",
+         lambda tmp: load(_utf16(tmp)), exc=None, check=_check_record({"q": Q, "u": U})),
+    Case("tdms-channel-shorter", "loaders", "jaxvs.check",
+         "TDMS whose force channel u is 10 samples shorter than q, given to check",
+         lambda tmp: __import__("jaxvs").check(str(_tdms_short_channel(tmp)), family="drive"),
+         match=r"in 'short\.tdms' the channel '[qu]' has \d+ samples but \['[qu]'\] have \d+ "
+               r"\(a channel shorter than the others.*cut the channels to a common length"),
+    Case("scope-cut-after-header", "loaders", "jaxvs.data.load_twincat_scope",
+         "TwinCAT Scope export cut right after its header (no data row)",
+         lambda tmp: load_twincat_scope(_scope_cut(tmp)),
+         match=r"ends after its header.*no data row.*Export the recording again",
+         timeout=_HOSTILE_S),
+    Case("scope-cut-after-header-load", "loaders", "jaxvs.data.load",
+         "TwinCAT Scope export cut right after its header, through load",
+         lambda tmp: load(_scope_cut(tmp)),
+         match=r"ends after its header.*Export the recording again", timeout=_HOSTILE_S),
+    Case("scope-whole-numbers-only", "loaders", "jaxvs.data.load",
+         "TwinCAT Scope export whose values are all whole numbers (no decimal mark anywhere)",
+         lambda tmp: load(_scope_integers(tmp)), exc=None, check=_check_scope_integers,
+         timeout=_HOSTILE_S),
+    Case("npz-header-declares-32-GB", "loaders", "jaxvs.data.load_npz",
+         "NPZ whose array header declares 4e9 float64 values in a 200-byte member",
+         lambda tmp: load_npz(_npz_huge_header(tmp)),
+         match=r"declares 32000000000 bytes.*holds.*truncated or edited.*save_npz",
+         timeout=_HOSTILE_S),
+    Case("xml-entity-bomb", "loaders", "jaxvs.data.load",
+         "XML with nested entities expanding to 10^9 characters (billion laughs)",
+         lambda tmp: load(_xml_bomb(tmp)),
+         match=r"bomb\.xml.*not well-formed.*Save it again", timeout=_HOSTILE_S),
+    Case("tdms-segment-of-2^60-bytes", "loaders", "jaxvs.data.load_tdms",
+         "TDMS lead-in declaring a 2^60-byte segment",
+         lambda tmp: load_tdms(_tdms_huge_segment(tmp)),
+         match=r"huge\.tdms.*cannot be read as TDMS.*again", timeout=_HOSTILE_S),
 ]
 # fmt: on
 

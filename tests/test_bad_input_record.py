@@ -61,6 +61,13 @@ def _r(ident, what, fn, exc=ValueError, match="", check=None) -> Case:
 CASES: list[Case] = [
     # --- the constructor ---------------------------------------------------------------------
     _r(
+        "dt-true",
+        "dt=True (a boolean, read as 1 s before)",
+        lambda: Record({"q": Q}, dt=True),
+        exc=TypeError,
+        match=r"dt and t0 must be numbers \[s\], got dt=True.*Pass the sampling period",
+    ),
+    _r(
         "dt-1e308",
         "dt=1e308",
         lambda: Record({"q": Q}, dt=1e308),

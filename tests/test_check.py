@@ -54,7 +54,8 @@ def test_drive_moving_one_way_is_refused():
 
 def test_clipped_force_is_reported():
     report = jaxvs.check(drive_record(clip=20.0), family="drive")
-    assert any("'u' sits at its minimum or maximum" in w for w in report.content["warnings"])
+    findings = report.content["warnings"] + report.content["blocking"]  # blocking above 20 %
+    assert any("'u' sits at its minimum or maximum" in w for w in findings)
     assert report.content["records"][0]["signals"]["u"]["clipped_share"] > 0.01
 
 

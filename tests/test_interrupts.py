@@ -206,6 +206,8 @@ def test_an_earlier_report_is_kept_until_the_new_one_is_complete(files, tmp_path
     old.mkdir()
     (old / "report.json").write_text('{"old": true}')
     (old / "report.md").write_text("old")
+    marker = {"written_by": "jaxvs", "files": ["report.json", "report.md"]}
+    (old / ".jaxvs-report").write_text(json.dumps(marker))  # an earlier report of jaxvs
     proc = _start(CHECK, cwd, pause="writing the report:30")
     _wait_stage(proc, cwd, "writing the report")
     said, _ = _interrupt(proc)
@@ -297,3 +299,91 @@ def test_python_api_interrupts_propagate_and_leave_no_state(tmp_path):
     for delay in ("0.05", "0.3"):
         assert out[f"calibrate_{delay}"]["caught"] == "KeyboardInterrupt", out
         assert out[f"calibrate_{delay}"]["same_after"], out
+
+
+# --- randomised trials: SIGINT and SIGTERM at random moments, writing included ---------------
+
+TRIALS = int(os.environ.get("JAXVS_INTERRUPT_TRIALS", "20"))
+# Quick inputs (a one-direction ramp is not identifiable: diagnose and check report it fast),
+# so each trial reaches "writing the report" within seconds.
+QUICK = {
+    "check": (
+        ["check", "ramp.csv", "--family", "drive", "--out", "o"],
+        ["loading", "checking the data", "writing the report", "writing the report"],
+    ),
+    "diagnose": (
+        ["diagnose", "ramp.csv", "--family", "drive", "--out", "o", "--quiet"],
+        ["loading", "diagnosing", "writing the report", "writing the report"],
+    ),
+    "design": (
+        DESIGN,
+        ["loading", "searching designs", "writing the report", "writing the report"],
+    ),
+}
+
+
+def _trial(command: str, k: int, files: Path, root: Path) -> dict:
+    rng = np.random.default_rng([hash(command) % 2**32, k])
+    args, stages = QUICK[command]
+    stage = stages[int(rng.integers(len(stages)))]
+    # writing a report takes a fraction of a second: hit it early
+    delay = float(rng.uniform(0.0, 0.05 if stage.startswith("writing") else 0.3))
+    sig = (signal.SIGINT, signal.SIGTERM)[k % 2]
+    cwd = root / f"{command}-{k}"
+    cwd.mkdir()
+    _run_dir(files, cwd)
+    proc = _start(args, cwd)
+    trace = cwd / "stages.txt"
+    end = time.monotonic() + 240
+    while time.monotonic() < end and proc.poll() is None:
+        if trace.exists() and any(s.startswith(stage) for s in trace.read_text().splitlines()):
+            break
+        time.sleep(0.005)
+    time.sleep(delay)
+    proc.send_signal(sig)
+    try:
+        out, err = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        return {"where": (stage, delay, sig.name), "error": "did not stop within 120 s"}
+    return {
+        "where": (stage, round(delay, 3), sig.name),
+        "code": proc.returncode,
+        "err": err,
+        "cwd": cwd,
+    }
+
+
+def _judge(t: dict) -> str:
+    """'stopped' or 'finished' (the signal came after the end); fails on anything else."""
+    assert "error" not in t, t
+    code, err, cwd = t["code"], t["err"], t["cwd"]
+    assert "Traceback" not in err and "Exception ignored" not in err, (t["where"], err)
+    said = [line for line in err.splitlines() if "interrupted" in line or "terminated" in line]
+    if code in (0, 3):  # finished before the signal: a complete report, no interrupt line
+        assert not said, (t["where"], err)
+        assert _out_absent_or_complete(cwd), (t["where"], "finished without a report")
+        return "finished"
+    expected = 130 if t["where"][2] == "SIGINT" else 143
+    assert code == expected, (t["where"], code, err)
+    assert len(said) == 1, (t["where"], err)  # one line
+    assert ("terminated" in said[0]) == (expected == 143), said
+    complete = _out_absent_or_complete(cwd, files=("report.json", "report.md"))
+    assert complete == ("nothing was written" not in said[0]), (t["where"], said, complete)
+    return "stopped"
+
+
+@pytest.mark.parametrize("command", list(QUICK))
+def test_signals_at_random_moments(command, files, tmp_path):
+    """TRIALS runs, two at a time, each stopped by SIGINT or SIGTERM (alternating) at a
+    random moment of a random stage (writing the report twice as often): every one ends
+    with 130 / 143 and one line, or -- when the signal came after the end -- with a
+    complete report; never a crash, a traceback or a staging folder left behind."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(2) as pool:
+        trials = list(pool.map(lambda k: _trial(command, k, files, tmp_path), range(TRIALS)))
+    outcomes = [_judge(t) for t in trials]
+    print(command, {o: outcomes.count(o) for o in set(outcomes)})
+    assert outcomes.count("stopped") >= TRIALS // 2, outcomes

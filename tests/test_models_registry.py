@@ -110,3 +110,69 @@ def test_documented_errors(factory):
             build()
     with pytest.raises(TypeError):  # predict needs the sample time
         case.model.predict(case.u)  # type: ignore[call-arg]
+
+
+# --- the physical-range rule: one forbidden value per sign-constrained parameter --------------
+# Every model of MODELS is listed; a model without a parameter that cannot be negative says so
+# with an empty list (a new model must be added here, or the test below fails).
+def _drive(friction=None, mass=10.0):
+    from jaxvs.models import DriveAxis, ForceGain, PositionLoop, RigidAxis, VelocityLoop
+
+    return DriveAxis(
+        RigidAxis(mass, friction), PositionLoop(40.0), VelocityLoop(2000.0), ForceGain(1.0)
+    )
+
+
+_MOTOR = dict(inductance=1e-3, torque_constant=0.1, back_emf_constant=0.1, inertia=1e-4)
+M = jaxvs.models
+FORBIDDEN = {
+    "rational": [],
+    "modal": [],
+    "statespace": [],
+    "first_order": [(lambda: M.FirstOrder(20.0, 5.0, -300.0), r"FirstOrder: T1 must be > 0 s")],
+    "piecewise_first_order": [
+        (
+            lambda: M.PiecewiseFirstOrder([0.0, 50.0], [20.0, 24.0], [5.0, -3.0], [20.0, -10.0]),
+            r"PiecewiseFirstOrder: T1 must be > 0 s",
+        )
+    ],
+    "driven_first_order": [
+        (lambda: M.DrivenFirstOrder(20.0, 0.002, 0.0), r"DrivenFirstOrder: T1 must be > 0 s")
+    ],
+    "bias_free_regression": [],
+    "static_network": [],
+    "time_delay_network": [],
+    "virtual_sensor": [],
+    "drive_axis": [
+        (lambda: _drive(M.ViscousFriction(-200.0)), r"ViscousFriction: Fv must be >= 0"),
+        (lambda: _drive(M.CoulombFriction(-20.0)), r"CoulombFriction: Fc must be >= 0 N"),
+        (lambda: M.CoulombViscousFriction(10.0, -1.0), r"CoulombViscousFriction: Fv must be"),
+        (lambda: M.StribeckFriction(10.0, -12.0, 0.01), r"StribeckFriction: Fs must be >= 0"),
+        (lambda: M.DCMotor(-1.0, **_MOTOR), r"DCMotor: resistance must be > 0 Ω"),
+        (
+            lambda: M.DCMotor(1.0, **{**_MOTOR, "inertia": -1e-4}),
+            r"DCMotor: inertia must be > 0 kg·m²",
+        ),
+    ],
+}
+
+
+def test_every_model_declares_its_forbidden_values():
+    assert set(FORBIDDEN) == {name for name, _ in MODELS}
+
+
+@pytest.mark.parametrize("name", sorted(FORBIDDEN))
+def test_physical_range_rule(name):
+    """A negative mass, friction level, resistance or time constant is refused by the
+    constructor with one message form: the parameter, its bound and unit, the value, the fix."""
+    for build, match in FORBIDDEN[name]:
+        with pytest.raises(ValueError, match=match + r".*cannot be negative.*Give its magnitude"):
+            build()
+
+
+def test_computed_values_pass_the_rule():
+    """A JAX array is a computed value (a fit's trial point, a diagnosis effect's signed
+    parameter): the constructor takes it, so a fit is not stopped on its way."""
+    assert float(M.ViscousFriction(jnp.asarray(-1.0)).Fv) == -1.0
+    fit = jax.jit(lambda t1: M.FirstOrder(20.0, 5.0, t1).predict(jnp.zeros(3), 1.0))
+    assert np.all(np.isfinite(np.asarray(fit(jnp.asarray(-30.0)))))

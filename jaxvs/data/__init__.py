@@ -32,7 +32,7 @@ from ._mapping import (
     rename_signals as rename_signals,
     require_signals as require_signals,
 )
-from ._quality import signal_quality as signal_quality
+from ._quality import check_validation as check_validation, signal_quality as signal_quality
 from ._record import (
     DEFAULT_TIME_RTOL as DEFAULT_TIME_RTOL,
     Record as Record,

@@ -38,8 +38,23 @@ def delimiter_hint(header_line: str, delimiter: str) -> str | None:
     return None
 
 
+_GROUPED = re.compile(r"^\s*[-+]?[1-9]\d{0,2}([,.' ]\d{3})+([.,]\d+)?\s*$")
+
+
 def decimal_hint(cell: str, decimal: str) -> str | None:
-    """A fix when a cell that failed to parse is a number with a decimal comma."""
+    """A fix when a cell that failed to parse is a number with a decimal comma, or with
+    thousands separators (`1,000` is either: both readings are named)."""
+    if _GROUPED.match(cell) and not (decimal == "," and cell.count(",") == 1):
+        return (
+            "it looks like a number with thousands separators (digit grouping); export the "
+            "numbers without grouping"
+            + (
+                f", or, if ',' is its decimal comma (1,000 = 1.0), pass {_option('decimal', ',')}"
+                if decimal != "," and cell.count(",") == 1 and "." not in cell
+                else ""
+            )
+            + "."
+        )
     if decimal != "," and _DECIMAL_COMMA.match(cell):
         return f"it looks like a number with a decimal comma; pass {_option('decimal', ',')}."
     return None

@@ -464,6 +464,9 @@ def load_csv(
     raw = file.read_bytes()
     try:
         utf8 = encoding.lower().replace("_", "-") in ("utf-8", "utf8")
+        if utf8 and raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+            encoding = "utf-16"  # Excel's "Unicode text": its byte-order mark says so
+            utf8 = False
         text = raw.decode("utf-8-sig" if utf8 else encoding)
     except UnicodeDecodeError as error:
         raise ValueError(encoding_error(source, error, raw, encoding)) from None
@@ -487,6 +490,22 @@ def load_csv(
             "it looks truncated. Export it again; if it is complete, add a line break at the "
             "end of the last line."
         )
+    # Excel writes "sep=;" as the first line of a CSV whose separator is not the list
+    # separator of the locale: it names the separator, it is not the header.
+    if lines and re.fullmatch(r"\s*sep=(.)\s*", lines[0].lstrip("\ufeff")):
+        named = re.fullmatch(r"\s*sep=(.)\s*", lines[0].lstrip("\ufeff")).group(1)  # type: ignore[union-attr]
+        if delimiter not in (",", named):
+            raise ValueError(
+                f"{source}, line 1: the file names its separator ('sep={named}') but "
+                f"delimiter={delimiter!r} was given; pass delimiter={named!r} or leave it out."
+            )
+        if named == decimal:
+            raise ValueError(
+                f"{source}, line 1: the file's separator ('sep={named}') is the decimal mark "
+                f"{decimal!r}; pass the file's decimal mark, e.g. decimal=','."
+            )
+        delimiter = named
+        lines[0] = "# " + lines[0]  # skipped below like a comment line
     # Leading blank and comment lines are read as raw text: JSON metadata holds commas and
     # quotes that a CSV reader would split.
     first = 0
@@ -531,6 +550,13 @@ def load_csv(
                 "file ends this way)."
             )
         parsed = []
+        if not values and not units and _is_units_row(row):
+            shown = ", ".join(f"'{n} [{c.strip()}]'" for n, c in zip(column_names, row))
+            raise ValueError(
+                f"{source}, line {line} holds units ({', '.join(repr(c) for c in row)}), not "
+                f"numbers: move them into the header as {shown} (jaxvs converts to SI), then "
+                "the data start on the line after the header."
+            )
         for name, cell in zip(column_names, row):
             try:
                 parsed.append(float(cell if decimal == "." else cell.replace(decimal, ".")))
@@ -559,6 +585,20 @@ def load_csv(
         found=column_names,
         time_rtol=time_rtol,
     )
+
+
+def _is_units_row(row: list[str]) -> bool:
+    """A row of unit names under the header (every cell a short non-numeric word)."""
+
+    def number(cell: str) -> bool:
+        try:
+            float(cell.replace(",", "."))
+        except ValueError:
+            return False
+        return True
+
+    cells = [c.strip() for c in row]
+    return all(c and len(c) <= 12 and not number(c) and c.lower() != "nan" for c in cells)
 
 
 def save_csv(record: Record, path: PathLike) -> Path:
@@ -619,6 +659,7 @@ def load_npz(
         with open(file, "rb") as handle, np.load(handle, allow_pickle=False) as archive:
             if not hasattr(archive, "files"):
                 raise ValueError("it holds a single .npy array, not an archive of named arrays")
+            _check_npz_sizes(archive)
             variables = {key: archive[key] for key in archive.files}
     except Exception as error:
         # zipfile, zlib, EOF and format errors of a truncated or foreign file, and pickled
@@ -630,6 +671,26 @@ def load_npz(
     return _from_variables(
         variables, time=time, dt=dt, names=names, source=source, time_rtol=time_rtol
     )
+
+
+def _check_npz_sizes(archive: Any) -> None:
+    """Each member's array header must not declare more bytes than the member holds, so a
+    damaged or crafted header cannot make NumPy allocate more than the archive contains."""
+    for info in archive.zip.infolist():
+        with archive.zip.open(info) as member:
+            version = np.lib.format.read_magic(member)
+            read = (
+                np.lib.format.read_array_header_1_0
+                if version == (1, 0)
+                else np.lib.format.read_array_header_2_0
+            )
+            shape, _, dtype = read(member)
+        need = int(np.prod(shape, dtype=object)) * dtype.itemsize
+        if need > info.file_size:
+            raise ValueError(
+                f"its member {info.filename} declares {need} bytes of data but holds "
+                f"{info.file_size}; it is truncated or edited"
+            )
 
 
 def _from_variables(

@@ -3,26 +3,12 @@
 import os
 from pathlib import Path
 
+from .._files import regular_file
+
 PathLike = str | os.PathLike[str]
 
 
 def existing_file(path: PathLike) -> Path:
-    """`path` as a `Path` when it names an existing file; every loader starts here."""
-    if not isinstance(path, str | os.PathLike):
-        raise TypeError(
-            f"A file path must be a str or pathlib.Path, got {type(path).__name__}; pass the "
-            "path of the file to read."
-        )
-    file = Path(path)
-    if not file.exists():
-        raise FileNotFoundError(
-            f"No such file: {str(file)!r}. Check the path (relative paths start in the "
-            f"current directory {os.getcwd()!r})."
-        )
-    if file.is_dir():
-        raise ValueError(
-            f"{str(file)!r} is a directory, not a file; give the path of a file inside it."
-        )
-    if not file.is_file():
-        raise ValueError(f"{str(file)!r} is not a regular file; give the path of a file.")
-    return file
+    """`path` as a `Path` when it names an existing regular file; every loader starts here
+    (FIFOs, devices, folders and link loops are refused before opening, see `regular_file`)."""
+    return regular_file(path, "load")

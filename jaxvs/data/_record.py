@@ -84,6 +84,37 @@ def _freeze_metadata(metadata: Mapping[str, Any] | None) -> Mapping[str, Any]:
     return MappingProxyType(frozen)
 
 
+def _explain_time_defect(time: np.ndarray, steps: np.ndarray, index: int) -> None:
+    """Two common causes of a time column that does not increase, each with its own fix
+    (sorting would interleave concatenated runs; dropping repeated stamps would lose most
+    rows of a time column printed with too few decimals)."""
+    n = time.size
+    positive = steps[steps > 0]
+    typical = float(np.median(positive)) if positive.size else 0.0
+    # a restart: after at least two increasing stamps, time falls back near its start
+    falls = np.flatnonzero(steps < 0)
+    restarts = falls[time[falls + 1] - time[0] < 0.5 * (time[falls] - time[0])]
+    if index >= 2 and steps[index - 1] < 0 and restarts.size and typical > 0:
+        at = [int(i) + 1 for i in restarts[:5]]
+        raise ValueError(
+            f"The time vector restarts at sample {at[0]} (t = {float(time[at[0]])!r} s after "
+            f"t = {float(time[at[0] - 1])!r} s): the file holds {restarts.size + 1} runs one "
+            f"after another (restarts at samples {at}{', ...' if restarts.size > 5 else ''}). "
+            "Split it into one record per run at the restarts (Record.slice, or one file per "
+            "run); do not sort the samples, which would interleave the runs."
+        )
+    repeats = int(np.sum(steps == 0))
+    if repeats >= max(3, 0.1 * (n - 1)) and not np.any(steps < 0):
+        dt = float((time[-1] - time[0]) / (n - 1))
+        quantum = float(np.min(positive)) if positive.size else 0.0
+        raise ValueError(
+            f"The time vector repeats {repeats} of its {n} stamps: it was written with too "
+            f"few decimals (steps of {quantum:g} s for a sampling period of about {dt:.6g} s). "
+            f"Pass the sampling period instead of the time column (dt={dt:.6g}) or export "
+            "the time with more decimals; do not drop the repeated stamps (that loses rows)."
+        )
+
+
 def _uniform_time_base(t: Any, n: int, rtol: float) -> tuple[float, float]:
     """Validate a measured time vector and return `(t0, dt)` of its uniform grid."""
     time = np.asarray(t)
@@ -117,6 +148,7 @@ def _uniform_time_base(t: Any, n: int, rtol: float) -> tuple[float, float]:
     not_increasing = steps <= 0
     if not_increasing.any():
         index = int(np.argmax(not_increasing)) + 1
+        _explain_time_defect(time, steps, index)
         raise ValueError(
             f"The time vector is not strictly increasing: t[{index}] = {float(time[index])!r} <= "
             f"t[{index - 1}] = {float(time[index - 1])!r}. Sort the samples by time and drop "
@@ -254,6 +286,11 @@ class Record:
         if t is not None:
             t0, dt = _uniform_time_base(t, n, float(time_rtol))
         else:
+            if isinstance(dt, bool | np.bool_) or isinstance(t0, bool | np.bool_):
+                raise TypeError(
+                    f"dt and t0 must be numbers [s], got dt={dt!r}, t0={t0!r} (a boolean would "
+                    "be read as 1 s or 0 s). Pass the sampling period, e.g. dt=1e-3."
+                )
             try:
                 dt, t0 = float(dt), float(t0)  # type: ignore[arg-type]
             except (TypeError, ValueError):

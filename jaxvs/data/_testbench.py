@@ -144,6 +144,45 @@ def _export_span(file: Path) -> float | None:
     return (ticks["Endtime of export"] - ticks["Starttime of export"]) * 1e-7
 
 
+_SCOPE_SCAN_LINES = 100_000  # heuristic: a decimal mark shows within the first rows
+
+
+def _scope_decimal(file: Path, source: str) -> str:
+    """The decimal mark of a scope export's data rows, found here (bounded) rather than by
+    pytcs, whose search reads past the end of a file without a fractional number forever.
+
+    Refuses an export cut after its header (no data row) with a `ValueError`."""
+    with open(file, encoding="utf-8-sig", errors="replace") as handle:
+        first = handle.readline()
+        sep = first[4:5]
+        rows = 0
+        in_data = False
+        for _, line in zip(range(_SCOPE_SCAN_LINES), handle):
+            line = line.rstrip("\r\n")
+            if not in_data:
+                in_data = line[:1].isnumeric()
+                if not in_data:
+                    continue
+            if not line:
+                continue
+            rows += 1
+            marks = {c for c in line if not (c.isalnum() or c in (sep, "-", "+", " "))}
+            if len(marks) == 1:
+                return marks.pop()
+            if len(marks) > 1:
+                raise ValueError(
+                    f"{source}: data row {rows} holds {''.join(sorted(marks))!r} besides the "
+                    f"separator {sep!r}, so its decimal mark is ambiguous; the file was edited. "
+                    "Export it again from TwinCAT Scope."
+                )
+    if rows == 0:
+        raise ValueError(
+            f"{source} ends after its header: it holds no data row (the export was cut or "
+            "interrupted). Export the recording again from TwinCAT Scope."
+        )
+    return "."  # whole numbers only: any decimal mark reads them
+
+
 def load_twincat_scope(
     path: PathLike,
     *,
@@ -197,10 +236,11 @@ def load_twincat_scope(
             "'SampleTime[ms]' header row). Export the scope recording as 'CSV' from TwinCAT "
             "Scope, or load a plain CSV with jaxvs.data.load_csv."
         )
+    decimal = _scope_decimal(file, source)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            scope = pytcs.ScopeFile(str(file))
+            scope = pytcs.ScopeFile(str(file), decimal=decimal)
             scope.load()
             items = list(scope.items())
     except Exception as error:  # pytcs raises assorted errors on malformed files

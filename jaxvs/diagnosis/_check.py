@@ -34,7 +34,8 @@ from .._html import markdown_to_html, report_html
 from .._misc import json_safe, require_x64
 from ..data import Record, signal_quality
 from ._base import GapModel, NotIdentifiable, unwrap
-from ._diagnose import FAMILIES, _check_signals, _records
+from ._diagnose import _CHECK_VALUES, FAMILIES, _check_signals, _memory_check, _records
+from ._options import validate_options
 
 __all__ = ["CheckReport", "check"]
 
@@ -159,6 +160,7 @@ def _excitation_band(x: np.ndarray, fs: float) -> tuple[float, float] | None:
 _INPUTS = {"drive": "u", "tmf": "x_e", "thermal": "T_chassis"}
 _OUTPUTS = {"drive": "q", "tmf": "x_t", "thermal": "T_bearing"}
 _NOT_JUDGED = {"drive": ("r",), "tmf": ("y",), "thermal": ()}
+_LIVE = {"drive": ("u",), "tmf": (), "thermal": ()}  # see signal_quality(live=...)
 
 
 def _record_quality(record: Record, name: str, family: str) -> tuple[dict, list[str], list[str]]:
@@ -177,7 +179,10 @@ def _record_quality(record: Record, name: str, family: str) -> tuple[dict, list[
         s for s in fam.optional if s in record and s not in _NOT_JUDGED[family]
     )
     summary["signals"], blocking, warnings = signal_quality(
-        {s: record[s] for s in signals if s != "t"}, name=name, required=fam.required
+        {s: record[s] for s in signals if s != "t"},
+        name=name,
+        required=fam.required,
+        live=_LIVE[family],
     )
     u = _INPUTS[family]
     if u in record and np.ptp(record[u]) > 0:
@@ -294,9 +299,12 @@ def check(
     require_x64("check", "the nominal model's calibration and its Jacobian")
     if family not in FAMILIES:
         raise ValueError(f"check: unknown family {family!r}; choose one of {sorted(FAMILIES)}.")
-    recs = _records(data, "calibration", signals)
-    fam = FAMILIES[family](**options)
-    _check_signals(fam, recs)
+    recs = _records(data, "calibration", signals, "check")
+    fam = FAMILIES[family](
+        **validate_options(family, options, "check", FAMILIES[family].option_keys)
+    )
+    _check_signals(fam, recs, "check")
+    _memory_check(fam, sum(len(r) for r, _ in recs), "check", _CHECK_VALUES)
     return check_records(fam, recs)
 
 

@@ -12,11 +12,19 @@ from typing import Any
 import numpy as np
 
 from .._misc import require_x64
-from ..data import Record, load_renamed, rename_signals, require_signals, split_blocks
+from ..data import (
+    Record,
+    check_validation,
+    load_renamed,
+    rename_signals,
+    require_signals,
+    split_blocks,
+)
 from ._base import AbstractFamily, NotIdentifiable
 from ._drive import DriveFamily
 from ._engine import search
 from ._gapmap import gap_map
+from ._options import validate_options
 from ._report import DiagnosisReport
 from ._stats import block_length, gap_change_interval, nrmse
 from ._thermal import ThermalFamily
@@ -29,12 +37,14 @@ FAMILIES["thermal"] = ThermalFamily
 FAMILIES["tmf"] = TMFFamily
 
 
-def _records(data: Any, role: str, signals: Any = None) -> list[tuple[Record, str]]:
+def _records(
+    data: Any, role: str, signals: Any = None, who: str = "diagnose"
+) -> list[tuple[Record, str]]:
     if data is None:
         return []
     items = list(data) if isinstance(data, list | tuple) else [data]
     if not items:
-        raise ValueError(f"diagnose: no {role} experiments given.")
+        raise ValueError(f"{who}: no {role} experiments given.")
     out = []
     for i, item in enumerate(items):
         if isinstance(item, Record):
@@ -51,15 +61,34 @@ def _records(data: Any, role: str, signals: Any = None) -> list[tuple[Record, st
                 out.append((rec, base if len(recs) == 1 else f"{base}[{k}]"))
         else:
             raise TypeError(
-                f"diagnose: {role} experiment {i + 1} is a {type(item).__name__}; give a "
+                f"{who}: {role} experiment {i + 1} is a {type(item).__name__}; give a "
                 "jaxvs.data.Record or a path to a CSV, NPZ, MAT or HDF5 file."
             )
     return out
 
 
-def _check_signals(fam: AbstractFamily, recs: list[tuple[Record, str]]) -> None:
+def _check_signals(
+    fam: AbstractFamily, recs: list[tuple[Record, str]], who: str = "diagnose"
+) -> None:
     for rec, name in recs:
-        where = f"diagnose(family={fam.name!r})"
+        missing = [s for s in fam.required if s not in rec.names]
+        base = name.split("[")[0]
+        apart = [  # the file holds it, in a record of another length (a channel cut short)
+            (s, other, n2)
+            for s in missing
+            for other, n2 in recs
+            if n2 != name and n2.split("[")[0] == base and s in other.names
+        ]
+        if apart:
+            s, other, n2 = apart[0]
+            raise ValueError(
+                f"{who}(family={fam.name!r}): in {base!r} the channel {s!r} has {len(other)} "
+                f"samples but {list(rec.names)} have {len(rec)} (a channel shorter than the "
+                "others, so the file was read as separate records); cut the channels to a "
+                f"common length (Record.slice(0, {min(len(other), len(rec))})) and merge them, "
+                "or export the recording again with all channels complete."
+            )
+        where = f"{who}(family={fam.name!r})"
         require_signals(rec, fam.required, where=where, name=name, optional=fam.optional)
 
 
@@ -81,6 +110,26 @@ def _check_sampling(recs: list[tuple[Record, str]]) -> None:
                 f"{1 / dt0:g} Hz; all experiments must share one sampling rate. Resample "
                 "them to a common rate first and say so in your report."
             )
+
+
+# heuristics: float64 working values per recorded sample, the search's first round from a
+# drive record of 2·10^6 samples whose first round asked for 12 GB (an upper bound for
+# families that decimate less), the check's Jacobian and quality measures a tenth of it
+_SEARCH_VALUES = 750
+_CHECK_VALUES = 75
+
+
+def _memory_check(fam: AbstractFamily, n: int, who: str, values_per_sample: int) -> None:
+    """Refuse a run whose largest step would not fit in memory, before it starts."""
+    from .._memory import guard
+
+    guard(
+        8.0 * values_per_sample * n,
+        f"{who}: the {fam.name} family's {'search' if who == 'diagnose' else 'check'} on "
+        f"{n} samples",
+        "Decimate the records (jaxvs.signal.decimate) or slice them to the stretch that "
+        "matters (Record.slice); a few 10^4 samples per experiment are usually enough.",
+    )
 
 
 def _not_identifiable_report(fam, why, cal_recs, val_recs, how, t_start, res=None, check=None):
@@ -193,11 +242,15 @@ def diagnose(
         if progress:
             print(f"[jaxvs diagnose {time.perf_counter() - t_start:6.1f} s] {msg}", file=sys.stderr)
 
-    fam = FAMILIES[family](**options)
+    fam = FAMILIES[family](
+        **validate_options(family, options, "diagnose", FAMILIES[family].option_keys)
+    )
     cal_recs = _records(calibration, "calibration", signals)
     val_recs = _records(validation, "validation", signals)
     _check_signals(fam, cal_recs + val_recs)
     _check_sampling(cal_recs + val_recs)
+    if val_recs:  # the same record twice is no validation; another scale is no twin
+        check_validation([(r, n) for r, n in cal_recs], [(r, n) for r, n in val_recs], fam.required)
     if not val_recs:
         if len(cal_recs) >= 2:
             k = max(1, int(round(holdout * len(cal_recs))))
@@ -219,6 +272,7 @@ def diagnose(
     # a verdict, the others travel with the report as warnings
     from ._check import check_records
 
+    _memory_check(fam, sum(len(r) for r, _ in cal_recs + val_recs), "diagnose", _SEARCH_VALUES)
     say("checking the calibration data (jaxvs check)")
     checked = check_records(fam, cal_recs, raise_value_errors=True).content
     if checked["blocking"]:

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..._misc import as_real, is_traced
+from ..._misc import as_real, check_physical, is_traced
 from .._base import AbstractModel, check_parameters
 from .._nonlinear_simulate import (
     check_step,
@@ -92,7 +92,6 @@ class PositionLoop(eqx.Module):
     def __check_init__(self):
         check_parameters(self)
 
-
     kp: Float[Array, ""]
 
     def __init__(self, kp: ArrayLike):
@@ -115,7 +114,6 @@ class VelocityLoop(eqx.Module):
 
     def __check_init__(self):
         check_parameters(self)
-
 
     kv: Float[Array, ""]
     ki: Float[Array, ""]
@@ -141,7 +139,6 @@ class AbstractActuator(eqx.Module):
 
     def __check_init__(self):
         check_parameters(self)
-
 
     @property
     @abc.abstractmethod
@@ -256,6 +253,10 @@ class DCMotor(AbstractActuator):
         ratio: ArrayLike = 1.0,
     ):
         w = "DCMotor"
+        check_physical(resistance, f"{w}: resistance", unit="Ω")
+        check_physical(inductance, f"{w}: inductance", unit="H")
+        check_physical(inertia, f"{w}: inertia", unit="kg·m²")
+        check_physical(viscous_damping, f"{w}: viscous_damping", strict=False, unit="N·m·s")
         self.resistance = _param(resistance, "resistance", w)
         L = _param(inductance, "inductance", w)
         self.inductance = eqx.error_if(L, ~(L > 0), f"{w}: inductance must be > 0 H.")
@@ -720,9 +721,7 @@ def _simulate(drive, r, fe, ua, y0, dt, solver, rtol, atol, max_steps):
             n_substeps=drive.n_substeps,
             solver=solver,
         )
-        dys = jax.vmap(lambda t, y, u, f: drive._plant(t, y, ((u, f), None)))(
-            ts, yp, command, fe
-        )
+        dys = jax.vmap(lambda t, y, u, f: drive._plant(t, y, ((u, f), None)))(ts, yp, command, fe)
         states = yp
     nd = drive.n_dof
     force = jax.vmap(lambda y, u: drive.actuator.force(drive._split(y)[2], u))(yp, command)

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..._misc import as_real, concrete
+from ..._misc import as_real, check_physical, concrete
 from .._base import check_parameters
 
 __all__ = [
@@ -85,13 +85,17 @@ def smooth_sign(velocity: ArrayLike, velocity_scale: float) -> Array:
     return jnp.tanh(v / velocity_scale)
 
 
+def _level(x: ArrayLike, what: str, unit: str) -> ArrayLike:
+    """A friction level given by the user: >= 0 (the sign comes from the velocity)."""
+    return check_physical(x, what, strict=False, unit=unit)
+
+
 class AbstractFriction(eqx.Module):
     """A friction law: `friction(v)` is the force [N] that opposes the velocity `v` [m/s]
     (same sign as `v`, to be subtracted in `m a = f − friction(v)`)."""
 
     def __check_init__(self):
         check_parameters(self)
-
 
     @abc.abstractmethod
     def __call__(self, velocity: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
@@ -116,7 +120,7 @@ class ViscousFriction(AbstractFriction):
     Fv: Float[Array, ""]
 
     def __init__(self, Fv: ArrayLike):
-        self.Fv = as_real(Fv, "ViscousFriction: Fv")
+        self.Fv = as_real(_level(Fv, "ViscousFriction: Fv", "N·s/m"), "ViscousFriction: Fv")
 
     def __call__(self, velocity):
         return self.Fv * jnp.asarray(velocity)
@@ -135,7 +139,7 @@ class CoulombFriction(AbstractFriction):
     velocity_scale: float = eqx.field(static=True)
 
     def __init__(self, Fc: ArrayLike, *, velocity_scale: float = DEFAULT_VELOCITY_SCALE):
-        self.Fc = as_real(Fc, "CoulombFriction: Fc")
+        self.Fc = as_real(_level(Fc, "CoulombFriction: Fc", "N"), "CoulombFriction: Fc")
         self.velocity_scale = _check_scale(velocity_scale, "CoulombFriction")
 
     def __call__(self, velocity):
@@ -172,8 +176,8 @@ class CoulombViscousFriction(AbstractFriction):
         velocity_scale: float = DEFAULT_VELOCITY_SCALE,
     ):
         where = "CoulombViscousFriction"
-        self.Fc = as_real(Fc, f"{where}: Fc")
-        self.Fv = as_real(Fv, f"{where}: Fv")
+        self.Fc = as_real(_level(Fc, f"{where}: Fc", "N"), f"{where}: Fc")
+        self.Fv = as_real(_level(Fv, f"{where}: Fv", "N·s/m"), f"{where}: Fv")
         self.offset = as_real(offset, f"{where}: offset")
         self.velocity_scale = _check_scale(velocity_scale, where)
 
@@ -219,12 +223,12 @@ class StribeckFriction(AbstractFriction):
         velocity_scale: float = DEFAULT_VELOCITY_SCALE / 10,
     ):
         where = "StribeckFriction"
-        self.Fc = as_real(Fc, f"{where}: Fc")
-        self.Fs = as_real(Fs, f"{where}: Fs")
+        self.Fc = as_real(_level(Fc, f"{where}: Fc", "N"), f"{where}: Fc")
+        self.Fs = as_real(_level(Fs, f"{where}: Fs", "N"), f"{where}: Fs")
         self.vs = eqx.error_if(
             as_real(vs, f"{where}: vs"), ~(jnp.asarray(vs) > 0), f"{where}: vs must be > 0."
         )
-        self.Fv = as_real(Fv, f"{where}: Fv")
+        self.Fv = as_real(_level(Fv, f"{where}: Fv", "N·s/m"), f"{where}: Fv")
         if not float(shape) > 0:
             raise ValueError(f"{where}: shape must be > 0 (1 or 2 usually); got {shape}.")
         self.shape = float(shape)

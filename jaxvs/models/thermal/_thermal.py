@@ -20,6 +20,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._misc import check_physical
 from .._base import AbstractModel
 
 __all__ = ["DrivenFirstOrder", "FirstOrder", "PiecewiseFirstOrder"]
@@ -50,6 +51,7 @@ class FirstOrder(AbstractModel):
     T1: Float[Array, "*batch"]
 
     def __init__(self, T0: ArrayLike, k: ArrayLike, T1: ArrayLike):
+        check_physical(T1, "FirstOrder: T1", unit="s")
         self.T0, self.k, self.T1 = (_scalar(v, n) for v, n in ((T0, "T0"), (k, "k"), (T1, "T1")))
 
     def __call__(self, t: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
@@ -88,6 +90,7 @@ class PiecewiseFirstOrder(AbstractModel):
     continuous: bool = eqx.field(static=True, default=False)
 
     def __init__(self, starts, T0, k, T1, continuous: bool = False):
+        check_physical(T1, "PiecewiseFirstOrder: T1", unit="s")
         self.starts = _scalar(starts, "starts")
         self.T0, self.k, self.T1 = (_scalar(v, n) for v, n in ((T0, "T0"), (k, "k"), (T1, "T1")))
         shapes = {self.starts.shape, self.T0.shape, self.k.shape, self.T1.shape}
@@ -165,6 +168,7 @@ class DrivenFirstOrder(AbstractModel):
         atol: float = 1e-8,
         adjoint: diffrax.AbstractAdjoint | None = None,
     ):
+        check_physical(T1, "DrivenFirstOrder: T1", unit="s")
         self.T_ref, self.K, self.T1 = (
             _scalar(v, n) for v, n in ((T_ref, "T_ref"), (K, "K"), (T1, "T1"))
         )

@@ -123,6 +123,33 @@ def _metrics(y: np.ndarray, p: np.ndarray) -> dict[str, float | None]:
     return out
 
 
+def _memory_check(n: int, n_pool: int, max_delay: int) -> None:
+    """Refuse delays the records cannot support, and searches that would not fit in memory,
+    before anything is built.
+
+    Estimate (an upper bound): the delayed feature matrix `X` holds `n·n_pool·(D+1)`
+    float64 values, and each of the `D+1` delay sets gets its own slice of it in the
+    vectorised fits, so the search holds about `8·n·n_pool·(D+1)²` bytes at once."""
+    from ..._memory import guard
+
+    if max_delay >= max(n // 4, 1):
+        raise ValueError(
+            f"design: max_delay={max_delay} samples is not below a quarter of the {n} "
+            f"samples of the records ({n // 4}); the delayed inputs would leave too few "
+            f"samples to fit. Give max_delay (--max-delay) below {max(n // 4, 1)}, or "
+            "decimate fast records first (jaxvs.signal.decimate) so that a delay of a few "
+            "samples spans the lag you need."
+        )
+    estimate = 8.0 * n * n_pool * (max_delay + 1) ** 2
+    guard(
+        estimate,
+        f"design: the search with max_delay={max_delay} over {n_pool} inputs and {n} samples",
+        "Lower max_delay (--max-delay) or max_inputs (--max-inputs), decimate the records "
+        "(jaxvs.signal.decimate), or slice them to the stretch you need "
+        "(Record.slice).",
+    )
+
+
 def design(
     data: Any,
     *,
@@ -223,6 +250,7 @@ def design(
         holdout=holdout,
         signals=signals,
     )
+    _memory_check(prep.U.shape[0], min(max_inputs, prep.U.shape[1]), max_delay)
     checked = _check_data(prep)  # `jaxvs check` on the design data, before any fitting
     if checked["blocking"]:
         return _refused(prep, checked, t_start)
