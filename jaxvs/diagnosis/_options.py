@@ -25,6 +25,7 @@ OPTION_SPECS: dict[str, dict[str, tuple[str, float | None, float | None, str]]] 
         "friction_sharpness": ("float>0", None, None, "smooth-sign width / peak velocity"),
         "zoh_force": ("bool", None, None, "the force is zero-order held by the drive"),
         "controller_taps": ("int", 1, 512, "taps of the identified controller"),
+        "mass": ("float", 0.0, None, "moving mass [kg] when the record does not excite it"),
     },
     "tmf": {
         "order": ("int", 1, 40, "order of the TMF"),
