@@ -190,6 +190,16 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
         gap_validation=_float(gap.get("validation")),
         noise_floor=_float(gap.get("noise_floor")),
         gap_after=_float(verdict.get("validation_gap")),
+        status=verdict.get("status"),
+        over_floor=_float((verdict.get("remainder") or {}).get("over_floor")),
+        null_bound_over_floor=_float((verdict.get("remainder") or {}).get("threshold_over_floor")),
+        null_p95_over_floor=_float((verdict.get("remainder") or {}).get("null_p95_over_floor")),
+        remainder_where=[
+            {k: w.get(k) for k in ("axis", "label", "share", "fraction", "p_value")}
+            for w in (verdict.get("remainder") or {}).get("where") or []
+        ][:3],
+        status_line=verdict.get("status_line"),
+        distortion=content.get("distortion"),
         not_identifiable=content.get("not_identifiable"),
         rejected=[
             {
@@ -603,7 +613,9 @@ def _print_row(r: dict) -> None:
     )
     print(
         f"{r['case']:36s} expected={exp:40s} found={got:40s} "
-        f"primary={r.get('found_primary')} {mark} shrink={_num(r.get('shrink'))} "
+        f"primary={r.get('found_primary')} {mark} status={r.get('status')} "
+        f"over={_num(r.get('over_floor'))}/{_num(r.get('null_bound_over_floor'))} "
+        f"shrink={_num(r.get('shrink'))} "
         f"{_num(r.get('seconds'), '{:.1f}')} s load {os.getloadavg()[0]:.2f}",
         flush=True,
     )
