@@ -1,5 +1,12 @@
-"""Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows."""
+"""Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows,
+the best linear approximation of a system under periodic excitation."""
 
+from ._bla import (
+    BLA as BLA,
+    best_linear_approximation as best_linear_approximation,
+    find_period as find_period,
+    period_noise as period_noise,
+)
 from ._cwt import (
     CWTDamping as CWTDamping,
     cwt_damping as cwt_damping,
