@@ -1,4 +1,4 @@
-"""Blind benchmark of `jaxvs.diagnose` on plants built independently of jaxvs (issue 14).
+"""Blind benchmark of `jaxvs.diagnose` on plants built independently of jaxvs.
 
 The cases come from `benchmarks/blind_plants.py`: drive, tmf and thermal plants written
 with numpy/scipy only, every effect of DESIGN.md §3.2 built in at least two structurally
@@ -52,7 +52,7 @@ import jaxvs  # noqa: E402
 RESULTS = pathlib.Path(__file__).parent / "results"
 QUICK_CASES = 6
 
-# targets of issue 14 (the goal column of its table)
+# the targets (the goal column of the table)
 TARGETS = {
     "primary_accuracy": 0.95,
     "false_positive_rate": 0.0,
@@ -114,7 +114,8 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
     cal, val, info = blind_plants.generate(case)
     t_gen = time.perf_counter() - t0
     samples = int(sum(len(r) for r in cal + val))
-    truth_set = sorted(case.effects)
+    ool = case.out_of_library
+    truth_set = [] if ool else sorted(case.effects)
     row = {
         "case": case.name,
         "family": case.family,
@@ -125,6 +126,7 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
         "primary": case.primary,
         "primary_alternatives": list(case.primary_alternatives),
         "truth": info["truth"],
+        "out_of_library": ool,
         "samples": samples,
         "generate_seconds": t_gen,
     }
@@ -181,7 +183,14 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
         found=found,
         accepted=accepted,
         found_primary=primary,
-        primary_ok=(primary in ok_primary) if case.effects else primary is None and not found,
+        primary_ok=((primary in ok_primary) if truth_set else primary is None and not found),
+        wrong_names=sorted(found) if ool else [],
+        status_ok=(
+            verdict.get("status") in ("unexplained", "partly_explained")
+            if ool
+            else verdict.get("status") == ("adequate" if case.effect_free else None)
+            or (bool(truth_set) and verdict.get("status") in ("explained", "partly_explained"))
+        ),
         exact_set=sorted(found) == truth_set,
         spurious=sorted(set(found) - set(truth_set)),
         missed=sorted(set(truth_set) - set(found)),
@@ -238,6 +247,8 @@ def _median(xs):
 
 def summarise(rows: list[dict]) -> dict:
     def block(rs):
+        ools = [r for r in rs if r.get("out_of_library")]
+        rs = [r for r in rs if not r.get("out_of_library")]
         eff = [r for r in rs if r["effects"]]
         free = [r for r in rs if not r["effects"]]
         fp = _rate(r["false_positive"] for r in free)
@@ -279,6 +290,17 @@ def summarise(rows: list[dict]) -> dict:
             ),
             "cases_20k_samples_or_more": len(large),
             "median_samples": _median(r["samples"] for r in rs),
+            "primary_accuracy_named": _rate(r["primary_ok"] for r in eff),
+            "exact_set_rate_named": _rate(r["exact_set"] for r in eff),
+            "adequate_effect_free": _rate(r.get("status") == "adequate" for r in free),
+            "status_known_effect_free": sum(r.get("status") is not None for r in free),
+            "out_of_library_cases": len(ools),
+            "out_of_library_wrong_names": sum(len(r.get("wrong_names") or []) for r in ools),
+            "out_of_library_cases_named": sum(bool(r.get("wrong_names")) for r in ools),
+            "out_of_library_status_ok": _rate(r.get("status_ok") for r in ools),
+            "out_of_library_unexplained": sum(r.get("status") == "unexplained" for r in ools),
+            "out_of_library_where": _rate(bool(r.get("remainder_where")) for r in ools),
+            "out_of_library_median_over_floor": _median(r.get("over_floor") for r in ools),
         }
 
     fams = sorted({r["family"] for r in rows})
@@ -307,7 +329,7 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
     o = summary["overall"]
     load = meta["load_average"]
     lines = [
-        "# Blind diagnosis benchmark (independent plants, issue 14)",
+        "# Blind diagnosis benchmark (independent plants)",
         "",
         f"{o['cases']} cases ({o['effect_free_cases']} effect-free, {o['effect_cases']} with "
         f"effects), median {o['median_samples']:.0f} samples per case (calibration + "
@@ -320,7 +342,7 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         )
         + f"jax {meta['jax']}, commit {meta.get('commit', '?')}.",
         "",
-        "| metric | measured | target (issue 14) | |",
+        "| metric | measured | target | |",
         "|---|---|---|---|",
         f"| primary effect right | {_pct(o['primary_accuracy'])} | ≥ 95 % | "
         f"{_met(o['primary_accuracy'], TARGETS['primary_accuracy'], False)} |",
@@ -351,18 +373,36 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         f"| worst CPU time (this process) of those cases | "
         f"{_num(o.get('max_cpu_seconds_20k_samples_or_more'), '{:.1f}')} s | | |",
         f"| diagnosis errors (exceptions) | {o['errors']} | 0 | |",
+        f"| effect-free cases with status `adequate` | {_pct(o['adequate_effect_free'])} "
+        f"| ≥ 95 % | {_met(o['adequate_effect_free'], 0.95, False)} |",
+        f"| out-of-library cases: library names given (wrong names) | "
+        f"{o['out_of_library_wrong_names']} in {o['out_of_library_cases_named']} of "
+        f"{o['out_of_library_cases']} cases | 0 | "
+        f"{_met(o['out_of_library_wrong_names'] if o['out_of_library_cases'] else None, 0, True)} |",
+        f"| out-of-library cases: status `unexplained` / `partly_explained` | "
+        f"{_pct(o['out_of_library_status_ok'])} ({o['out_of_library_unexplained']} unexplained) "
+        f"| 100 % | {_met(o['out_of_library_status_ok'], 1.0, False)} |",
+        f"| out-of-library cases: where the remainder lies given | "
+        f"{_pct(o['out_of_library_where'])} (median remainder "
+        f"{_num(o['out_of_library_median_over_floor'], '{:.1f}')}× the floor) | | |",
         "",
-        "Per family:",
+        "Per family: sensitivity on the cases with library effects (primary right, exact set), "
+        "specificity on the effect-free cases (false positives, spurious effects per case, "
+        "status `adequate`), the out-of-library cases (wrong names, status):",
         "",
-        "| family | cases (effect-free) | primary | false positives | specificity | exact set "
-        "| spurious / case | missed | median shrink | median time |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| family | cases (effect-free) | primary (effect cases) | exact set (effect cases) "
+        "| false positives | spurious / case | adequate (effect-free) | out-of-library: "
+        "cases, wrong names, unexplained or partly | missed | median shrink | median time |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for fam, d in summary["per_family"].items():
         lines.append(
-            f"| {fam} | {d['cases']} ({d['effect_free_cases']}) | {_pct(d['primary_accuracy'])} "
-            f"| {_pct(d['false_positive_rate'])} | {_pct(d['specificity'])} "
-            f"| {_pct(d['exact_set_rate'])} | {_num(d['spurious_per_case'])} "
+            f"| {fam} | {d['cases']} ({d['effect_free_cases']}) "
+            f"| {_pct(d['primary_accuracy_named'])} | {_pct(d['exact_set_rate_named'])} "
+            f"| {_pct(d['false_positive_rate'])} | {_num(d['spurious_per_case'])} "
+            f"| {_pct(d['adequate_effect_free'])} "
+            f"| {d['out_of_library_cases']}, {d['out_of_library_wrong_names']}, "
+            f"{_pct(d['out_of_library_status_ok'])} "
             f"| {d['missed_total']} | {_num(d['median_shrink'])} "
             f"| {_num(d['median_seconds'], '{:.1f}')} s |"
         )
@@ -370,8 +410,9 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         "",
         "Per case (expected → found; `primary` marks the verdict's primary effect):",
         "",
-        "| case | expected | found (primary) | | shrink | gap / noise floor | time (CPU) | load |",
-        "|---|---|---|---|---|---|---|---|",
+        "| case | expected | found (primary) | | status | shrink | gap / noise floor "
+        "| remainder / floor (null bound) | where the remainder lies | time (CPU) | load |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         exp = ", ".join(r["effects"]) or "none"
@@ -390,8 +431,18 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
             if r.get("gap_validation") and r.get("noise_floor")
             else "—"
         )
+        if r.get("out_of_library") and "error" not in r:
+            mark = "ok" if r.get("status_ok") and not r.get("wrong_names") else "WRONG"
+        where = "; ".join(
+            f"{w['label']} ({w['share']:.2f})" for w in (r.get("remainder_where") or [])[:2]
+        )
+        status = r.get("status") or "—"
+        if r.get("status") and not r.get("status_ok", True):
+            status = f"**{status}**"
         lines.append(
-            f"| {r['case']} | {exp} | {got} | {mark} | {_num(r.get('shrink'))} | {gn} "
+            f"| {r['case']} | {exp} | {got} | {mark} | {status} | {_num(r.get('shrink'))} "
+            f"| {gn} | {_num(r.get('over_floor'), '{:.1f}')} "
+            f"({_num(r.get('null_bound_over_floor'), '{:.2f}')}) | {where or '—'} "
             f"| {_num(r.get('seconds'), '{:.1f}')} s ({_num(r.get('cpu_seconds'), '{:.1f}')} s) "
             f"| {_num(r.get('load_average'), '{:.1f}')} |"
         )

@@ -13,6 +13,7 @@ import numpy as np
 from .._misc import require_x64
 from ..data import Record, load, split_blocks
 from ._base import AbstractFamily, NotIdentifiable
+from ._distortion import nonlinear_distortion
 from ._drive import DriveFamily
 from ._engine import search
 from ._gapmap import gap_map
@@ -305,6 +306,10 @@ def diagnose(
         fdr=fdr,
     )
 
+    distortion = nonlinear_distortion(fam.name, exps)
+    if distortion.get("finding"):
+        state["remainder"]["findings"] = [distortion["finding"]]
+
     cands = list(res.candidates.values())
     order = {n: i for i, n in enumerate(res.accepted)}
     cands.sort(
@@ -356,6 +361,7 @@ def diagnose(
             "target": fam.target_label,
         },
         "not_identifiable": None,
+        "distortion": distortion,
         "check": checked,
         "warnings": list(checked["warnings"]),
         "where": where,

@@ -32,7 +32,9 @@ class DiagnosisReport:
     `final_effects`, `primary`, `validation_gap`, `shrink`, `shrink_interval`, `adequate`
     (true only for `adequate`), `remainder` (`gap`, `over_floor`, `null_p95`,
     `within_null`, `where`: the strongest cells of the final residual's gap map with
-    their share and test); `None` when the record cannot identify the nominal model), `not_identifiable` (the
+    their share and test); `None` when the record cannot identify the nominal model),
+    `distortion` (records that repeat their excitation: the noise measured from period to
+    period and the nonlinear distortion level, a finding when above the noise), `not_identifiable` (the
     reason, or `None`), `nominal`, `data`, `rounds`, `pruning` (every effect of the final
     model tested against the final model without it: `effect`, `effects`, `gap_without`,
     `gap_with`, `reduction`, `reduction_interval`, `shrink`, `delta_bic`,
@@ -162,6 +164,7 @@ class DiagnosisReport:
                 f"noise floor {pct(g['noise_floor'])}."
             )
         lines += _remainder_markdown(v)
+        lines += _distortion_markdown(c.get("distortion"))
         lines += [
             "",
             "## Gap (metric: normalised RMS error of the target)",
@@ -294,6 +297,24 @@ def _remainder_markdown(v: dict[str, Any]) -> list[str]:
         lines += ["", f"Test: {rem['where'][0]['test']}."]
     elif not rem.get("within_null"):
         lines += ["", "No time window or operating point concentrates the remainder."]
+    return lines
+
+
+def _distortion_markdown(d: dict[str, Any] | None) -> list[str]:
+    """The noise measured from repeated periods and the nonlinear distortion level."""
+    if not d or not d.get("available"):
+        return []
+    lines = [
+        "",
+        "### Measured noise and nonlinear distortion (repeated periods)",
+        "",
+        f"{d['periods']} period(s) of {d['period_samples']} samples of `{d['input']}` in "
+        f"{d['realisations']} realisation(s); {d['method']}: noise "
+        f"{100 * d['noise_level']:.3g} %, distortion {100 * d['distortion_level']:.3g} % of "
+        f"the RMS of `{d['output']}` ({_num(d['distortion_over_noise'])}× the noise).",
+    ]
+    if d.get("finding"):
+        lines += ["", f"**Finding: {d['finding']}.**"]
     return lines
 
 

@@ -123,7 +123,9 @@ def status_line(verdict: dict[str, Any] | None, not_identifiable: str | None = N
     null = f"null bound {p95r:.3g}×" if p95r is not None and np.isfinite(p95r) else "no null"
     effects = ", ".join(verdict.get("effects") or [])
     where = rem.get("where") or []
-    lies = "; ".join(f"{w['label']} (share {w['share']:.2f}, p = {w['p_value']:.2g})" for w in where[:3])
+    lies = "; ".join(
+        f"{w['label']} (share {w['share']:.2f}, p = {w['p_value']:.2g})" for w in where[:3]
+    )
     lies = f"; it lies in {lies}" if lies else "; no cell concentrates it"
     if status == "adequate":
         return f"verdict: adequate — no effect needed; remaining gap {size} ({null})"

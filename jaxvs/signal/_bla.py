@@ -93,9 +93,7 @@ def _as_mpn(x: np.ndarray, name: str) -> np.ndarray:
     return x
 
 
-def best_linear_approximation(
-    u: np.ndarray, y: np.ndarray, *, excited: float = 1e-6
-) -> BLA:
+def best_linear_approximation(u: np.ndarray, y: np.ndarray, *, excited: float = 1e-6) -> BLA:
     """The BLA from `u` to `y` over periods and realisations, with the variance of its
     noise and of its nonlinear distortion (Pintelon & Schoukens 2012, §3.7; module doc).
 
