@@ -17,7 +17,7 @@ import math
 import numpy as np
 import pytest
 
-from jaxvs.signal import best_linear_approximation, find_period, period_noise
+from jaxvs.signal import best_linear_approximation, find_period, period_noise, settled_periods
 
 F, N, A = 24, 256, 0.05  # lines, samples per period, cubic coefficient
 U = 0.25  # one-sided amplitude of each line: σ² = 2 F U² = 3
@@ -109,7 +109,7 @@ def test_period_and_period_noise():
     assert find_period(x) == 200
     assert find_period(rng.standard_normal(1000)) is None
     noise = 0.1 * rng.standard_normal(x.size)
-    var, rho, p = period_noise(np.sin(np.arange(x.size) / 7.0) * 0 + x + noise, 200)
+    var, rho, p = period_noise(x + noise, 200, skip=0)
     assert p == 5
     # 4 × 200 degrees of freedom: within 15 %
     assert var == pytest.approx(0.01, rel=0.15)
@@ -125,3 +125,16 @@ def test_bad_input_is_refused():
         best_linear_approximation(np.ones((2, 16)), np.ones((2, 16)))
     with pytest.raises(ValueError, match="fewer than 2 periods"):
         period_noise(np.ones(300), 200)
+
+
+def test_settled_periods_skip_the_transient():
+    # a decaying transient over the first two periods, then a periodic response with noise
+    rng = np.random.default_rng(3)
+    one = rng.standard_normal(100)
+    y = np.tile(one, 8) + 0.01 * rng.standard_normal(800)
+    y[:200] += 5 * np.exp(-np.arange(200) / 40.0)
+    assert settled_periods(y, 100) == 2
+    var, _, p = period_noise(y, 100)
+    assert p == 6 and var == pytest.approx(1e-4, rel=0.2)
+    # a settled record still drops its first period
+    assert settled_periods(np.tile(one, 4) + 0.01 * rng.standard_normal(400), 100) == 1

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ..signal import best_linear_approximation, find_period
+from ..signal import best_linear_approximation, find_period, settled_periods
 from ._base import Experiment
 
 __all__ = ["PAIRS", "nonlinear_distortion"]
@@ -53,7 +53,8 @@ def nonlinear_distortion(family: str, experiments: Sequence[Experiment]) -> dict
     # the period most records share; its records are the realisations
     period, group = max(groups.items(), key=lambda kv: (len(kv[1]), -kv[0]))
     n_per = min(u.size // period for u, _, _ in group)
-    skip = 1 if n_per >= 3 else 0  # the first period holds the transient
+    # the leading periods that hold the transient, the most any record needs
+    skip = max(settled_periods(y[: n_per * period], period) for _, y, _ in group)
     p = n_per - skip
     cut = slice(skip * period, (skip + p) * period)
     uu = np.stack([u[cut].reshape(p, period) for u, _, _ in group])

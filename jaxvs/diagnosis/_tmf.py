@@ -677,8 +677,7 @@ def periodic_noise(
     period = find_period(xe, rtol=1e-3)
     if period is None:
         return None
-    skip = 1 if xe.size // period >= 3 else 0
-    var, rho, _ = period_noise(xt, period, skip=skip)
+    var, rho, _ = period_noise(xt, period)
     return max(var - resolution**2 / 12.0, 0.0), float(np.clip(rho, 0.0, 0.99))
 
 

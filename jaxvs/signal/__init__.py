@@ -6,6 +6,7 @@ from ._bla import (
     best_linear_approximation as best_linear_approximation,
     find_period as find_period,
     period_noise as period_noise,
+    settled_periods as settled_periods,
 )
 from ._cwt import (
     CWTDamping as CWTDamping,

@@ -36,7 +36,13 @@ import math
 
 import numpy as np
 
-__all__ = ["BLA", "best_linear_approximation", "find_period", "period_noise"]
+__all__ = [
+    "BLA",
+    "best_linear_approximation",
+    "find_period",
+    "period_noise",
+    "settled_periods",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -205,17 +211,40 @@ def find_period(x: np.ndarray, *, min_periods: int = 2, rtol: float = 1e-6) -> i
     return int(lags[np.argmax(ok)]) if ok.any() else None
 
 
-def period_noise(y: np.ndarray, period: int, *, skip: int = 0) -> tuple[float, float, int]:
+def settled_periods(y: np.ndarray, period: int, *, factor: float = 2.0) -> int:
+    """The number of leading whole periods of `y` that still hold a transient: the
+    variance of the difference between consecutive periods,
+    `v_p = mean((y_{p+1} − y_p)²)/2`, is the noise's once the response is periodic; the
+    leading periods with `v_p` above `factor` times the median of the `v_p` are skipped
+    (at least one, when three or more periods are recorded)."""
+    y = np.asarray(y, dtype=float)
+    p = y.size // period
+    if p < 3:
+        return 0
+    yp = y[: p * period].reshape(p, period)
+    v = np.mean(np.diff(yp, axis=0) ** 2, axis=1) / 2.0
+    med = float(np.median(v))
+    skip = 1
+    while skip < p - 2 and v[skip] > factor * med:
+        skip += 1
+    return skip
+
+
+def period_noise(
+    y: np.ndarray, period: int, *, skip: int | None = None
+) -> tuple[float, float, int]:
     """The noise of a periodic response from its period-to-period variation.
 
     **Arguments:** `y` the record, `period` [samples], `skip` whole periods dropped at the
-    start (the transient).
+    start (the transient; `None`: [`settled_periods`][]).
 
     **Returns:** `(variance, rho, periods)`: the noise variance (sample variance over the
     periods, per sample, averaged), the lag-one autocorrelation of the deviations from
     the mean period (the noise's colour) and the number of periods used.
     """
     y = np.asarray(y, dtype=float)
+    if skip is None:
+        skip = settled_periods(y, period)
     p = y.size // period - skip
     if p < 2:
         raise ValueError(
