@@ -248,6 +248,7 @@ def _median(xs):
 def summarise(rows: list[dict]) -> dict:
     def block(rs):
         ools = [r for r in rs if r.get("out_of_library")]
+        every = rs
         rs = [r for r in rs if not r.get("out_of_library")]
         eff = [r for r in rs if r["effects"]]
         free = [r for r in rs if not r["effects"]]
@@ -289,7 +290,7 @@ def summarise(rows: list[dict]) -> dict:
                 default=None,
             ),
             "cases_20k_samples_or_more": len(large),
-            "median_samples": _median(r["samples"] for r in rs),
+            "median_samples": _median(r.get("samples") for r in every),
             "primary_accuracy_named": _rate(r["primary_ok"] for r in eff),
             "exact_set_rate_named": _rate(r["exact_set"] for r in eff),
             "adequate_effect_free": _rate(r.get("status") == "adequate" for r in free),
@@ -331,8 +332,9 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
     lines = [
         "# Blind diagnosis benchmark (independent plants)",
         "",
-        f"{o['cases']} cases ({o['effect_free_cases']} effect-free, {o['effect_cases']} with "
-        f"effects), median {o['median_samples']:.0f} samples per case (calibration + "
+        f"{o['cases'] + o['out_of_library_cases']} cases ({o['effect_free_cases']} effect-free, "
+        f"{o['effect_cases']} with library effects, {o['out_of_library_cases']} with an effect "
+        f"in no library), median {o['median_samples']:.0f} samples per case (calibration + "
         f"validation); {meta['cpu_count']} CPU cores shared with other jobs, load average "
         + (
             f"{load['start'][0]:.1f} to {load['end'][0]:.1f} over {len(meta['parts'])} runs "
