@@ -419,7 +419,7 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
     for r in rows:
         exp = ", ".join(r["effects"]) or "none"
         if "error" in r:
-            got, mark = f"error: {r['error'][:80]}", "FAIL"
+            got, mark = "error: " + " ".join(r["error"].split())[:80], "FAIL"
         else:
             got = ", ".join(r["found"]) or "none"
             got += f" ({r['found_primary']})" if r["found_primary"] else ""
