@@ -181,7 +181,8 @@ def test_drive_effect_free_twin_gives_no_effect(tmp_path, capsys):
             "parameters",
         }
         assert not c["accepted"]
-    for f in ("report.md", "gap_map.png", "before_after.png", "residual_spectra.png"):
+    figures = ("verdict.png", "gap_map.png", "before_after.png", "residual_spectra.png")
+    for f in ("report.md", *figures):
         assert (out / f).exists()
 
 
