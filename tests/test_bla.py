@@ -138,3 +138,14 @@ def test_settled_periods_skip_the_transient():
     assert p == 6 and var == pytest.approx(1e-4, rel=0.2)
     # a settled record still drops its first period
     assert settled_periods(np.tile(one, 4) + 0.01 * rng.standard_normal(400), 100) == 1
+
+
+def test_a_slow_signal_is_not_taken_for_a_periodic_one():
+    # a point-to-point move with dwells, sampled fast: a few samples apart it is nearly
+    # itself, but it never returns
+    t = np.linspace(0, 10, 40000)
+    r = np.clip(np.sin(2 * np.pi * 0.13 * t) * 1.7, -1, 1) + 0.3 * t
+    assert find_period(r, rtol=1e-3) is None
+    # a held (zero-order) copy of a periodic command is still periodic
+    one = np.repeat(np.random.default_rng(4).standard_normal(50), 4)
+    assert find_period(np.tile(one, 3), rtol=1e-3) == 200

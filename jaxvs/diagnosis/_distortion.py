@@ -56,10 +56,15 @@ def nonlinear_distortion(family: str, experiments: Sequence[Experiment]) -> dict
     # the leading periods that hold the transient, the most any record needs
     skip = max(settled_periods(y[: n_per * period], period) for _, y, _ in group)
     p = n_per - skip
+    if p < 2:
+        return {"available": False, "reason": "fewer than 2 settled periods"}
     cut = slice(skip * period, (skip + p) * period)
     uu = np.stack([u[cut].reshape(p, period) for u, _, _ in group])
     yy = np.stack([y[cut].reshape(p, period) for _, y, _ in group])
-    bla = best_linear_approximation(uu - uu.mean(), yy - yy.mean())
+    try:
+        bla = best_linear_approximation(uu - uu.mean(), yy - yy.mean())
+    except ValueError as err:
+        return {"available": False, "reason": str(err)}
     scale = float(np.sqrt(np.mean(yy**2)))
     noise = bla.noise_level / scale if scale > 0 else float("nan")
     dist = bla.distortion_level / scale if scale > 0 else float("nan")

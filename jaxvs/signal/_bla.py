@@ -187,7 +187,9 @@ def find_period(x: np.ndarray, *, min_periods: int = 2, rtol: float = 1e-6) -> i
     The smallest lag `L ≥ 4` with at least `min_periods` whole periods in the record and
     `‖x[L:] − x[:-L]‖² ≤ rtol · ‖x − x̄‖² · (N − L)/N`: the signal repeats exactly up to
     the relative level `rtol` (a commanded excitation repeats to rounding; a measured
-    one does not: give the command). Computed for every lag at once by FFT
+    one does not: give the command), after it has first decorrelated (a difference of at
+    least half its energy at a shorter lag: a slow signal is close to itself a few
+    samples later without repeating). Computed for every lag at once by FFT
     autocorrelation.
     """
     x = np.asarray(x, dtype=float)
@@ -202,12 +204,18 @@ def find_period(x: np.ndarray, *, min_periods: int = 2, rtol: float = 1e-6) -> i
     f = np.fft.rfft(xc, nfft)
     acf = np.fft.irfft(f * np.conj(f), nfft)[:n]
     c2 = np.concatenate([[0.0], np.cumsum(xc**2)])
-    lags = np.arange(4, n // max(min_periods, 1) + 1)
-    if lags.size == 0:
+    lags = np.arange(1, n // max(min_periods, 1) + 1)
+    if lags.size < 4:
         return None
     # ‖x[L:] − x[:-L]‖² = Σ_{i≥L} x² + Σ_{i<N−L} x² − 2 acf(L)
     diff = (c2[n] - c2[lags]) + c2[n - lags] - 2.0 * acf[lags]
-    ok = diff <= rtol * energy * (n - lags) / n
+    ref = energy * (n - lags) / n
+    # a period is a return: the signal must first decorrelate (a slow signal differs little
+    # from itself a few samples later without repeating)
+    apart = np.flatnonzero(diff >= 0.5 * ref)
+    if apart.size == 0:
+        return None
+    ok = (diff <= rtol * ref) & (lags > lags[apart[0]]) & (lags >= 4)
     return int(lags[np.argmax(ok)]) if ok.any() else None
 
 
