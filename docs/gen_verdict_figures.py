@@ -2,8 +2,9 @@
 
 - `docs/img/verdict_states.png`: the four verdict states on the spindle thermal twin
   (12 h at 5 s): effect-free (`adequate`), a hidden heat capacity (`explained`), a
-  thermocouple drifting through the record -- an effect in no library -- (`unexplained`)
-  and both at once (`partly_explained`); each panel is `jaxvs.plotting.plot_verdict`.
+  thermocouple that starts drifting in the last quarter of the record -- an effect in no
+  library -- (`unexplained`) and both at once (`partly_explained`); each panel is
+  `jaxvs.plotting.plot_verdict`.
 - `docs/img/verdict_floor.png`: the noise floor a nonlinearity cannot hide in: the best
   linear approximation of a static cubic `y = u + 0.05 u³` under 16 random-phase
   multisines of 4 periods each, with noise, by `jaxvs.signal.best_linear_approximation`
@@ -39,9 +40,10 @@ HOURS = 3600.0
 
 
 def drifting(rec: Record, kelvin: float) -> Record:
-    """The record with its bearing thermocouple drifting quadratically by `kelvin`."""
+    """The record with its bearing thermocouple drifting by `kelvin` over its last
+    quarter (quadratically from where the drift starts)."""
     sig = {k: np.asarray(rec[k]) for k in rec.names}
-    s = np.linspace(0.0, 1.0, len(rec))
+    s = np.clip((np.linspace(0.0, 1.0, len(rec)) - 0.75) / 0.25, 0.0, 1.0)
     sig["T_bearing"] = sig["T_bearing"] + kelvin * s**2
     return Record(sig, dt=rec.dt, metadata=rec.metadata)
 
@@ -86,5 +88,8 @@ def floor() -> None:
 
 
 if __name__ == "__main__":
-    floor()
+    import sys
+
+    if "--states-only" not in sys.argv:
+        floor()
     states()
