@@ -518,7 +518,7 @@ def main(argv=None) -> int:
         raise SystemExit("--jobs must be >= 1")
     if args.cases is not None and args.cases < 1:
         raise SystemExit("--cases must be >= 1")
-    all_cases = blind_plants.cases()
+    all_cases = blind_plants.all_cases()
     if args.only:
         names = args.only.split(",")
         unknown = set(names) - {c.name for c in all_cases}
@@ -618,7 +618,7 @@ def _run_chunks(chosen, args, meta, out: pathlib.Path) -> int:
 def _merge(paths: list[str], out: pathlib.Path) -> int:
     """One report from the JSON of several runs: their cases in benchmark order, each
     part's commit, load average and case list kept in `meta["parts"]`."""
-    order = {c.name: i for i, c in enumerate(blind_plants.cases())}
+    order = {c.name: i for i, c in enumerate(blind_plants.all_cases())}
     rows: dict[str, dict] = {}
     parts = []
     for path in paths:
