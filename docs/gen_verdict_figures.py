@@ -92,4 +92,5 @@ if __name__ == "__main__":
 
     if "--states-only" not in sys.argv:
         floor()
-    states()
+    if "--floor-only" not in sys.argv:
+        states()

@@ -194,13 +194,16 @@ def plot_bla(bla, fs: float = 1.0, ax=None):
     lines = bla.lines
     f = lines * fs / n
     db = lambda x: 10 * np.log10(np.maximum(np.asarray(x, float), 1e-300))  # noqa: E731
-    free = ~np.isin(k_all, lines) & (k_all > 0)
+    # the lines not excited where the output's power stands above its noise
+    free = ~np.isin(k_all, lines) & (k_all > 0) & (bla.y_excess > bla.y_noise_var / bla.periods)
     ax.plot(f_all[free], db(bla.y_excess[free]), ".", color="C1", ms=3,
-            label="output at lines not excited")  # fmt: skip
+            label="output at lines not excited (above the noise)")  # fmt: skip
     ax.plot(f, db(bla.y_noise_var[lines]), "-", color="C7", lw=1, label="noise (period to period)")
     if np.isfinite(bla.y_distortion_var).any():
         ax.plot(f, db(bla.y_distortion_var), "-", color="C3", lw=1.5,
                 label="nonlinear distortion (realisations)")  # fmt: skip
+    low = float(np.min(db(bla.y_noise_var[lines])))
+    ax.set_ylim(bottom=low - 15.0)
     ax.set_xlabel("frequency [Hz]" if fs != 1.0 else "frequency [cycles/sample]")
     ax.set_ylabel("power per line [dB]")
     ax.set_title(
