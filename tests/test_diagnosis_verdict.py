@@ -1,7 +1,7 @@
 """The verdict's four states, the evidence of a large effect partly explained, and the
 noise and nonlinear distortion measured on records that repeat.
 
-Oracles: the states' definitions (DESIGN.md §3.2) on hand-made null distributions; the
+Oracles: the states' definitions on hand-made null distributions; the
 effective sample size of an AR(1) noise `(1 − ρ)/(1 + ρ)·N` (Box, Jenkins & Reinsel);
 the period-to-period variance of a known noise; a static cubic's distortion against a
 linear system's.
