@@ -524,8 +524,7 @@ def main(argv=None) -> int:
         unknown = set(names) - {c.name for c in all_cases}
         if unknown:
             raise SystemExit(f"unknown case(s) {sorted(unknown)}; see blind_plants.py")
-        by_name = {c.name: c for c in all_cases}
-        chosen = [by_name[n] for n in dict.fromkeys(names)]  # in the order given
+        chosen = [c for c in all_cases if c.name in names]
     else:
         n = QUICK_CASES if args.quick else args.cases
         chosen = blind_plants.select(all_cases, n, args.family)

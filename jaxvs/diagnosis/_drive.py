@@ -966,9 +966,8 @@ class DriveFamily(AbstractFamily):
         from `r` and the measured `q` to `u`, fitted by least squares, explaining at least
         95 % of the force variance): the closed loop is simulated at the record's sampling
         with that controller, the rigid axis (exact zero-order-hold discretisation), the
-        record's quantisation step (a random encoder zero per draw) and force noise of the
-        controller fit's residual level and colour ([`controller_noise`][]; white noise of
-        its white part when the residual is nearly white). Otherwise (open loop, or no identifiable
+        record's quantisation step (a random encoder zero per draw) and white force noise
+        of the controller fit's residual level (its white part). Otherwise (open loop, or no identifiable
         controller) the record's own motion, low-pass filtered, is replayed: the force is
         the nominal model's, plus white noise of the record's level, the position
         re-quantised. Each simulated record then goes through the same preprocessing."""
@@ -1156,32 +1155,6 @@ def identify_controller(
     return coef, r2, difference_noise_sigma(res)
 
 
-def controller_noise(
-    q: np.ndarray, u: np.ndarray, r: np.ndarray, dt: float, taps: int, coef: np.ndarray
-) -> tuple[float, float]:
-    """The force noise of a closed-loop record as a first-order autoregression: standard
-    deviation [N] and lag-one autocorrelation of the residual of the identified controller
-    ([`identify_controller`][]), both from medians of absolute deviations (of the residual
-    and of its differences, `var(Δe) = 2σ²(1 − ρ)`), so that sparse disturbances in the
-    force do not count as noise. The measured force's noise is the measurement's: a
-    coloured noise the null drew white would be taken for an effect."""
-    n = q.size
-    win = np.lib.stride_tricks.sliding_window_view
-    rp = np.concatenate([np.full(taps - 1, r[0]), r])
-    qp = np.concatenate([np.full(taps - 1, q[0]), q])
-    integ = np.cumsum(r - q) * dt
-    phi = np.concatenate(
-        [win(rp, taps)[:, ::-1], win(qp, taps)[:, ::-1], integ[:, None], np.ones((n, 1))], axis=1
-    )
-    res = u - phi @ coef
-    mad = lambda x: 1.4826 * float(np.median(np.abs(x - np.median(x))))  # noqa: E731
-    sigma, sigma_d = mad(res), mad(np.diff(res))
-    if sigma <= 0:
-        return sigma_d / np.sqrt(2.0), 0.0
-    rho = float(np.clip(1.0 - sigma_d**2 / (2.0 * sigma**2), 0.0, 0.995))
-    return sigma, rho
-
-
 def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Record]:
     q = np.asarray(rec["q"], float)
     u = np.asarray(rec["u"], float)
@@ -1210,13 +1183,7 @@ def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Recor
                 sims = None  # the identified loop does not track: replay instead
             else:
                 q_sim, u_sim = sims
-                sigma_c, rho = controller_noise(q, u, r, dt, taps, coef)
-                if rho > 0.5:  # coloured: the measured colour, at the residual's level
-                    w = rng.standard_normal(u_sim.shape) * sigma_c * np.sqrt(1 - rho * rho)
-                    w[:, 0] = sigma_c * rng.standard_normal(count)
-                    u_sim = u_sim + ss.lfilter([1.0], [1.0, -rho], w, axis=1)
-                else:
-                    u_sim = u_sim + sigma_u * rng.standard_normal(u_sim.shape)
+                u_sim = u_sim + sigma_u * rng.standard_normal(u_sim.shape)
                 sims = (q_sim, u_sim)
     if sims is None:
         # replay of the record's in-band motion; the force acting at t_k + dt/2 is what a
