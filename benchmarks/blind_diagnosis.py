@@ -114,7 +114,8 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
     cal, val, info = blind_plants.generate(case)
     t_gen = time.perf_counter() - t0
     samples = int(sum(len(r) for r in cal + val))
-    truth_set = sorted(case.effects)
+    ool = case.out_of_library
+    truth_set = [] if ool else sorted(case.effects)
     row = {
         "case": case.name,
         "family": case.family,
@@ -125,6 +126,7 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
         "primary": case.primary,
         "primary_alternatives": list(case.primary_alternatives),
         "truth": info["truth"],
+        "out_of_library": ool,
         "samples": samples,
         "generate_seconds": t_gen,
     }
@@ -181,7 +183,14 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
         found=found,
         accepted=accepted,
         found_primary=primary,
-        primary_ok=(primary in ok_primary) if case.effects else primary is None and not found,
+        primary_ok=((primary in ok_primary) if truth_set else primary is None and not found),
+        wrong_names=sorted(found) if ool else [],
+        status_ok=(
+            verdict.get("status") in ("unexplained", "partly_explained")
+            if ool
+            else verdict.get("status") == ("adequate" if case.effect_free else None)
+            or (bool(truth_set) and verdict.get("status") in ("explained", "partly_explained"))
+        ),
         exact_set=sorted(found) == truth_set,
         spurious=sorted(set(found) - set(truth_set)),
         missed=sorted(set(truth_set) - set(found)),
@@ -190,6 +199,16 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
         gap_validation=_float(gap.get("validation")),
         noise_floor=_float(gap.get("noise_floor")),
         gap_after=_float(verdict.get("validation_gap")),
+        status=verdict.get("status"),
+        over_floor=_float((verdict.get("remainder") or {}).get("over_floor")),
+        null_bound_over_floor=_float((verdict.get("remainder") or {}).get("threshold_over_floor")),
+        null_p95_over_floor=_float((verdict.get("remainder") or {}).get("null_p95_over_floor")),
+        remainder_where=[
+            {k: w.get(k) for k in ("axis", "label", "share", "fraction", "p_value")}
+            for w in (verdict.get("remainder") or {}).get("where") or []
+        ][:3],
+        status_line=verdict.get("status_line"),
+        distortion=content.get("distortion"),
         not_identifiable=content.get("not_identifiable"),
         rejected=[
             {
@@ -228,6 +247,9 @@ def _median(xs):
 
 def summarise(rows: list[dict]) -> dict:
     def block(rs):
+        ools = [r for r in rs if r.get("out_of_library")]
+        every = rs
+        rs = [r for r in rs if not r.get("out_of_library")]
         eff = [r for r in rs if r["effects"]]
         free = [r for r in rs if not r["effects"]]
         fp = _rate(r["false_positive"] for r in free)
@@ -268,7 +290,18 @@ def summarise(rows: list[dict]) -> dict:
                 default=None,
             ),
             "cases_20k_samples_or_more": len(large),
-            "median_samples": _median(r["samples"] for r in rs),
+            "median_samples": _median(r.get("samples") for r in every),
+            "primary_accuracy_named": _rate(r["primary_ok"] for r in eff),
+            "exact_set_rate_named": _rate(r["exact_set"] for r in eff),
+            "adequate_effect_free": _rate(r.get("status") == "adequate" for r in free),
+            "status_known_effect_free": sum(r.get("status") is not None for r in free),
+            "out_of_library_cases": len(ools),
+            "out_of_library_wrong_names": sum(len(r.get("wrong_names") or []) for r in ools),
+            "out_of_library_cases_named": sum(bool(r.get("wrong_names")) for r in ools),
+            "out_of_library_status_ok": _rate(r.get("status_ok") for r in ools),
+            "out_of_library_unexplained": sum(r.get("status") == "unexplained" for r in ools),
+            "out_of_library_where": _rate(bool(r.get("remainder_where")) for r in ools),
+            "out_of_library_median_over_floor": _median(r.get("over_floor") for r in ools),
         }
 
     fams = sorted({r["family"] for r in rows})
@@ -299,8 +332,9 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
     lines = [
         "# Blind diagnosis benchmark (independent plants)",
         "",
-        f"{o['cases']} cases ({o['effect_free_cases']} effect-free, {o['effect_cases']} with "
-        f"effects), median {o['median_samples']:.0f} samples per case (calibration + "
+        f"{o['cases'] + o['out_of_library_cases']} cases ({o['effect_free_cases']} effect-free, "
+        f"{o['effect_cases']} with library effects, {o['out_of_library_cases']} with an effect "
+        f"in no library), median {o['median_samples']:.0f} samples per case (calibration + "
         f"validation); {meta['cpu_count']} CPU cores shared with other jobs, load average "
         + (
             f"{load['start'][0]:.1f} to {load['end'][0]:.1f} over {len(meta['parts'])} runs "
@@ -341,18 +375,36 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         f"| worst CPU time (this process) of those cases | "
         f"{_num(o.get('max_cpu_seconds_20k_samples_or_more'), '{:.1f}')} s | | |",
         f"| diagnosis errors (exceptions) | {o['errors']} | 0 | |",
+        f"| effect-free cases with status `adequate` | {_pct(o['adequate_effect_free'])} "
+        f"| ≥ 95 % | {_met(o['adequate_effect_free'], 0.95, False)} |",
+        f"| out-of-library cases: library names given (wrong names) | "
+        f"{o['out_of_library_wrong_names']} in {o['out_of_library_cases_named']} of "
+        f"{o['out_of_library_cases']} cases | 0 | "
+        f"{_met(o['out_of_library_wrong_names'] if o['out_of_library_cases'] else None, 0, True)} |",
+        f"| out-of-library cases: status `unexplained` / `partly_explained` | "
+        f"{_pct(o['out_of_library_status_ok'])} ({o['out_of_library_unexplained']} unexplained) "
+        f"| 100 % | {_met(o['out_of_library_status_ok'], 1.0, False)} |",
+        f"| out-of-library cases: where the remainder lies given | "
+        f"{_pct(o['out_of_library_where'])} (median remainder "
+        f"{_num(o['out_of_library_median_over_floor'], '{:.1f}')}× the floor) | | |",
         "",
-        "Per family:",
+        "Per family: sensitivity on the cases with library effects (primary right, exact set), "
+        "specificity on the effect-free cases (false positives, spurious effects per case, "
+        "status `adequate`), the out-of-library cases (wrong names, status):",
         "",
-        "| family | cases (effect-free) | primary | false positives | specificity | exact set "
-        "| spurious / case | missed | median shrink | median time |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| family | cases (effect-free) | primary (effect cases) | exact set (effect cases) "
+        "| false positives | spurious / case | adequate (effect-free) | out-of-library: "
+        "cases, wrong names, unexplained or partly | missed | median shrink | median time |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for fam, d in summary["per_family"].items():
         lines.append(
-            f"| {fam} | {d['cases']} ({d['effect_free_cases']}) | {_pct(d['primary_accuracy'])} "
-            f"| {_pct(d['false_positive_rate'])} | {_pct(d['specificity'])} "
-            f"| {_pct(d['exact_set_rate'])} | {_num(d['spurious_per_case'])} "
+            f"| {fam} | {d['cases']} ({d['effect_free_cases']}) "
+            f"| {_pct(d['primary_accuracy_named'])} | {_pct(d['exact_set_rate_named'])} "
+            f"| {_pct(d['false_positive_rate'])} | {_num(d['spurious_per_case'])} "
+            f"| {_pct(d['adequate_effect_free'])} "
+            f"| {d['out_of_library_cases']}, {d['out_of_library_wrong_names']}, "
+            f"{_pct(d['out_of_library_status_ok'])} "
             f"| {d['missed_total']} | {_num(d['median_shrink'])} "
             f"| {_num(d['median_seconds'], '{:.1f}')} s |"
         )
@@ -360,13 +412,14 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         "",
         "Per case (expected → found; `primary` marks the verdict's primary effect):",
         "",
-        "| case | expected | found (primary) | | shrink | gap / noise floor | time (CPU) | load |",
-        "|---|---|---|---|---|---|---|---|",
+        "| case | expected | found (primary) | | status | shrink | gap / noise floor "
+        "| remainder / floor (null bound) | where the remainder lies | time (CPU) | load |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         exp = ", ".join(r["effects"]) or "none"
         if "error" in r:
-            got, mark = f"error: {r['error'][:80]}", "FAIL"
+            got, mark = "error: " + " ".join(r["error"].split())[:80], "FAIL"
         else:
             got = ", ".join(r["found"]) or "none"
             got += f" ({r['found_primary']})" if r["found_primary"] else ""
@@ -380,8 +433,18 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
             if r.get("gap_validation") and r.get("noise_floor")
             else "—"
         )
+        if r.get("out_of_library") and "error" not in r:
+            mark = "ok" if r.get("status_ok") and not r.get("wrong_names") else "WRONG"
+        where = "; ".join(
+            f"{w['label']} ({w['share']:.2f})" for w in (r.get("remainder_where") or [])[:2]
+        )
+        status = r.get("status") or "—"
+        if r.get("status") and not r.get("status_ok", True):
+            status = f"**{status}**"
         lines.append(
-            f"| {r['case']} | {exp} | {got} | {mark} | {_num(r.get('shrink'))} | {gn} "
+            f"| {r['case']} | {exp} | {got} | {mark} | {status} | {_num(r.get('shrink'))} "
+            f"| {gn} | {_num(r.get('over_floor'), '{:.1f}')} "
+            f"({_num(r.get('null_bound_over_floor'), '{:.2f}')}) | {where or '—'} "
             f"| {_num(r.get('seconds'), '{:.1f}')} s ({_num(r.get('cpu_seconds'), '{:.1f}')} s) "
             f"| {_num(r.get('load_average'), '{:.1f}')} |"
         )
@@ -455,7 +518,7 @@ def main(argv=None) -> int:
         raise SystemExit("--jobs must be >= 1")
     if args.cases is not None and args.cases < 1:
         raise SystemExit("--cases must be >= 1")
-    all_cases = blind_plants.cases()
+    all_cases = blind_plants.all_cases()
     if args.only:
         names = args.only.split(",")
         unknown = set(names) - {c.name for c in all_cases}
@@ -554,7 +617,7 @@ def _run_chunks(chosen, args, meta, out: pathlib.Path) -> int:
 def _merge(paths: list[str], out: pathlib.Path) -> int:
     """One report from the JSON of several runs: their cases in benchmark order, each
     part's commit, load average and case list kept in `meta["parts"]`."""
-    order = {c.name: i for i, c in enumerate(blind_plants.cases())}
+    order = {c.name: i for i, c in enumerate(blind_plants.all_cases())}
     rows: dict[str, dict] = {}
     parts = []
     for path in paths:
@@ -603,7 +666,9 @@ def _print_row(r: dict) -> None:
     )
     print(
         f"{r['case']:36s} expected={exp:40s} found={got:40s} "
-        f"primary={r.get('found_primary')} {mark} shrink={_num(r.get('shrink'))} "
+        f"primary={r.get('found_primary')} {mark} status={r.get('status')} "
+        f"over={_num(r.get('over_floor'))}/{_num(r.get('null_bound_over_floor'))} "
+        f"shrink={_num(r.get('shrink'))} "
         f"{_num(r.get('seconds'), '{:.1f}')} s load {os.getloadavg()[0]:.2f}",
         flush=True,
     )

@@ -113,6 +113,11 @@ class Case:
     def effect_free(self) -> bool:
         return not self.effects
 
+    @property
+    def out_of_library(self) -> bool:
+        """The plant's effect is in no library of the diagnosis (`effects` = `("ool:…",)`)."""
+        return any(e.startswith("ool:") for e in self.effects)
+
 
 # ================================================================================ helpers
 
@@ -244,6 +249,7 @@ def simulate_drive(p: dict, r_ctrl: np.ndarray | None, u_ol: np.ndarray | None, 
     i_dec = math.exp(-h / tau_i) if tau_i > 0 else 0.0
     i_amp = 0.0
     ext = p.get("external")  # callable t -> force, or None
+    ool = p.get("ool")  # out-of-library: callable (t, x, v) -> (force, mass factor, gain)
     posf = p.get("position_force")  # callable x -> force, or None
     tau_steps = int(p.get("transport_steps", 0))
     ctrl_delay = int(p.get("ctrl_delay", 0))
@@ -326,6 +332,10 @@ def simulate_drive(p: dict, r_ctrl: np.ndarray | None, u_ol: np.ndarray | None, 
         if f_lim < math.inf:
             i_amp = F + (i_amp - F) * i_dec  # exact for a held input (0: no lag)
             F = min(max(i_amp, -f_lim), f_lim)
+        m_fac = 1.0
+        if ool is not None:
+            dF, m_fac, gain = ool(t, xm, vm)
+            F = gain * F + dF
         F -= off
         if ext is not None:
             F += ext(t)
@@ -333,7 +343,7 @@ def simulate_drive(p: dict, r_ctrl: np.ndarray | None, u_ol: np.ndarray | None, 
             if posf is not None:
                 F += posf(xm)
             if fr == "none":
-                xm, vm = _rigid_update(xm, vm, F, M, Fv, h)
+                xm, vm = _rigid_update(xm, vm, F, M * m_fac, Fv, h)
             elif fr == "karnopp":
                 if abs(vm) < dv_stick:
                     brk = Fs_p if F > 0 else Fs_n
@@ -603,6 +613,37 @@ def _drive_position(case, rng, amp_travel, force_scale, M):
     return None, {}
 
 
+def _drive_out_of_library(case, p, speed, amp):
+    """An effect in no library of the diagnosis, as `(t, x, v) -> (force [N], mass
+    factor, force gain)`; `size` (settings) scales it. Time runs from each record's start
+    (each experiment starts cold).
+
+    - `ool-warmup`: viscous friction that falls as the lubricant warms up,
+      `Fv (1 + k e^{−t/τ})`, τ = 4 s;
+    - `ool-mass`: a moving mass that grows with the position (a telescopic axis),
+      `M (1 + β x/A)`, with the momentum term `−M′ v²`;
+    - `ool-drag`: fluid drag `−c v|v|` (a sealed axis in oil);
+    - `ool-gain`: a motor force constant falling as the winding warms,
+      `1 − g (1 − e^{−t/τ})`, τ = 3 s.
+    """
+    k = float(case.settings["size"])
+    M, Fv = p["M"], p["Fv"]
+    kind = case.variant
+    if kind == "ool-warmup":
+        return (lambda t, x, v: (-k * Fv * math.exp(-t / 4.0) * v, 1.0, 1.0)), {"k": k}
+    if kind == "ool-mass":
+        beta = k
+        return (lambda t, x, v: (-M * beta / amp * v * v, 1.0 + beta * x / amp, 1.0)), {
+            "beta": beta
+        }
+    if kind == "ool-drag":
+        c = k * Fv / speed
+        return (lambda t, x, v: (-c * v * abs(v), 1.0, 1.0)), {"c": c}
+    if kind == "ool-gain":
+        return (lambda t, x, v: (0.0, 1.0, 1.0 - k * (1.0 - math.exp(-t / 3.0)))), {"g": k}
+    raise ValueError(f"unknown out-of-library drive variant {kind!r}")
+
+
 def _drive_reference(kind, rng, n_ctrl, dtc, amp, t_move):
     if kind == "p2p":
         return _p2p_reference(rng, n_ctrl, dtc, amp, t_move, 0.4 * t_move)
@@ -632,6 +673,9 @@ def _drive_records(case: Case) -> tuple[list[Record], list[Record], dict]:
     )
     posf, ptruth = _drive_position(case, rng, amp, force_scale, M)
     p["position_force"] = posf
+    if case.variant.startswith("ool-"):
+        p["ool"], otruth = _drive_out_of_library(case, p, speed, amp)
+        truth.update(otruth)
     truth.update({f"position_{k}": v for k, v in ptruth.items()})
     roles = (
         ("calibration", s["n_cal"], s.get("ref_cal", "p2p")),
@@ -763,6 +807,71 @@ def _tmf_modes(case, rng, y, base):
     return modes
 
 
+def _tmf_out_of_library(case, x_e, dt_f, modes):
+    """Tool-side motion with the first mode replaced by one outside every library, its
+    modal coordinate `η` (`η″ + 2ζω η′ + ω² η = w x_e″`, `x_t = x_e − Σ η`) integrated
+    step by step relative to the root motion (classical Runge–Kutta on the 8× grid);
+    `size` scales it.
+
+    - `ool-duffing`: a stiffness that grows with the amplitude, `ω² (η + ε η³/η_ref²)`;
+    - `ool-drift`: a mode frequency drifting through the record (thermal growth of the
+      structure), `ω (1 + δ t/T)`;
+    - `ool-joint`: dry friction in a joint of the mode, `μ ω² η_ref sign(η′)` (the sign
+      smoothed over 0.1 % of the mode's velocity scale);
+    - `ool-sensor`: a tool-side sensor with a cubic calibration error,
+      `x_t + c (x_t − x̄)³/s²` (the structure linear).
+    `η_ref` is the RMS of the linear mode's coordinate."""
+    k = float(case.settings["size"])
+    kind = case.variant
+    if kind == "ool-sensor":
+        x_t = tmf_response(x_e, dt_f, modes)
+        d = x_t - x_t.mean()
+        return x_t + k * d**3 / float(np.var(d))
+    (f, z, w), rest = modes[0], modes[1:]
+    om = 2 * np.pi * f
+    # in the coordinate ξ = η − w x_e relative to the root motion the mode needs only the
+    # root velocity: ξ″ = −2ζω (ξ′ + w x_e′) − k(ξ + w x_e)
+    xe = x_e - x_e[0]
+    ve = np.gradient(xe, dt_f)
+    lin = _foh_filter([w, 0.0, 0.0], [1.0, 2 * z * om, om * om], dt_f, xe)
+    eta_ref = float(np.std(lin))
+    n = x_e.size
+    T = n * dt_f
+    eta = np.empty(n)
+
+    def accel(xi, dxi, x, v, t):
+        e, de = xi + w * x, dxi + w * v
+        if kind == "ool-drift":
+            o = om * (1 + k * t / T)
+            spring = (o * o) * e
+        elif kind == "ool-duffing":
+            o = om
+            spring = (o * o) * (e + k * e**3 / eta_ref**2)
+        elif kind == "ool-joint":
+            o = om
+            spring = (o * o) * e + k * (om * om) * eta_ref * math.tanh(de / (1e-3 * eta_ref * om))
+        else:
+            raise ValueError(f"unknown out-of-library tmf variant {kind!r}")
+        return -2 * z * o * de - spring
+
+    # classical Runge–Kutta, the root motion interpolated linearly within a step
+    xi = dxi = 0.0
+    eta[0] = w * xe[0]
+    h = dt_f
+    for i in range(n - 1):
+        t = i * h
+        xm, vm = 0.5 * (xe[i] + xe[i + 1]), 0.5 * (ve[i] + ve[i + 1])
+        k1x, k1v = dxi, accel(xi, dxi, xe[i], ve[i], t)
+        k2x, k2v = dxi + 0.5 * h * k1v, accel(xi + 0.5 * h * k1x, dxi + 0.5 * h * k1v, xm, vm, t)
+        k3x, k3v = dxi + 0.5 * h * k2v, accel(xi + 0.5 * h * k2x, dxi + 0.5 * h * k2v, xm, vm, t)
+        k4x = dxi + h * k3v
+        k4v = accel(xi + h * k3x, dxi + h * k3v, xe[i + 1], ve[i + 1], t + h)
+        xi += h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
+        dxi += h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        eta[i + 1] = xi + w * xe[i + 1]
+    return tmf_response(x_e, dt_f, rest) - eta
+
+
 def _tmf_excitation(kind, rng, n_fine, dt_f, fs):
     if kind == "noise":
         w = rng.standard_normal(n_fine)
@@ -831,7 +940,10 @@ def _tmf_records(case: Case) -> tuple[list[Record], list[Record], dict]:
         n_fine = n * os_ + 4 * os_
         for y in ys:
             x_e = _tmf_excitation(kind, rng, n_fine, dt_f, fs)
-            x_t = tmf_response(x_e, dt_f, _tmf_modes(case, rng, y, base))
+            if v.startswith("ool-"):
+                x_t = _tmf_out_of_library(case, x_e, dt_f, _tmf_modes(case, rng, y, base))
+            else:
+                x_t = tmf_response(x_e, dt_f, _tmf_modes(case, rng, y, base))
             f_meas = None
             if with_force_channel:
                 t = np.arange(n_fine) * dt_f
@@ -947,6 +1059,35 @@ def _chiller(rng, n, dt, t_air):
         T += dt * (heat - (cool if on else 0.0))
         tw[k] = T
     return tw
+
+
+def _thermal_out_of_library(case, rng, t, x, T_ch, noise):
+    """What an effect in no library adds to the measured bearing temperature [K]; its RMS
+    is `size` times the sensor noise.
+
+    - `ool-drift`: a thermocouple drifting quadratically through the record;
+    - `ool-step`: the sensor re-seated: an offset step at a random time of each record;
+    - `ool-interaction`: bearing heat from the preload, which grows with the chassis
+      temperature at speed: `∝ (v/v_max)·(T_chassis − mean)`;
+    - `ool-neighbour`: an unmeasured neighbouring unit switching on and off (2 h
+      cycle, 40 % on), seen through a 20 min lag."""
+    k = float(case.settings["size"])
+    kind = case.variant
+    T = t[-1] - t[0]
+    if kind == "ool-drift":
+        add = ((t - t[0]) / T) ** 2
+    elif kind == "ool-step":
+        add = (t >= t[0] + T * float(rng.uniform(0.3, 0.7))).astype(float)
+    elif kind == "ool-interaction":
+        add = x * (T_ch - T_ch.mean())
+    elif kind == "ool-neighbour":
+        on = (((t - t[0]) / 7200.0 + float(rng.uniform(0, 1))) % 1.0 < 0.4).astype(float)
+        dt = t[1] - t[0]
+        add = ss.lfilter([1 - math.exp(-dt / 1200.0)], [1, -math.exp(-dt / 1200.0)], on)
+    else:
+        raise ValueError(f"unknown out-of-library thermal variant {kind!r}")
+    add = add - add.mean()
+    return k * noise * add / max(float(np.std(add)), 1e-300)
 
 
 def _thermal_records(case: Case) -> tuple[list[Record], list[Record], dict]:
@@ -1069,6 +1210,8 @@ def _thermal_records(case: Case) -> tuple[list[Record], list[Record], dict]:
             X = Ad @ X + Bd @ np.array([Qm[k], Qb[k], t_air[k], t_w_eff[k]])
             T_ch[k], T_b[k] = X[0], X[1]
         T_meas = T_b + kappa * (t_air - T_b)
+        if v.startswith("ool-"):
+            T_meas = T_meas + _thermal_out_of_library(case, rng, t, x, T_ch, noise)
         sl = slice(0, n_rec * ndec, ndec)
 
         def sensor(y):
@@ -1441,6 +1584,54 @@ def cases() -> list[Case]:
     return drive + tmf + thermal
 
 
+# effects in no library of the diagnosis (`Case.effects` holds their own names, prefixed
+# "ool:"): no library name may be given; the verdict is `unexplained`
+OUT_OF_LIBRARY = {
+    "drive": ("warmup", "mass", "drag", "gain"),
+    "tmf": ("duffing", "drift", "joint", "sensor"),
+    "thermal": ("drift", "step", "interaction", "neighbour"),
+}
+# two sizes of each (drive: the effect's force relative to the friction/drag it acts
+# through; tmf: nonlinearity / drift level; thermal: RMS in noise units)
+OOL_SIZES = {
+    "drive": {"warmup": (0.3, 1.0), "mass": (0.1, 0.3), "drag": (0.2, 0.6), "gain": (0.05, 0.15)},
+    "tmf": {
+        "duffing": (0.3, 1.0),
+        "drift": (0.02, 0.06),
+        "joint": (0.03, 0.1),
+        "sensor": (0.03, 0.1),
+    },
+    "thermal": {
+        "drift": (3.0, 10.0),
+        "step": (3.0, 10.0),
+        "interaction": (3.0, 10.0),
+        "neighbour": (3.0, 10.0),
+    },
+}
+
+
+def all_cases() -> list[Case]:
+    """The library cases (`cases()`) followed by the out-of-library ones."""
+    return cases() + out_of_library()
+
+
+def out_of_library() -> list[Case]:
+    """The out-of-library cases: 4 effects per family, each at a small and a large size."""
+    out = []
+    make = {"drive": _d, "tmf": _t, "thermal": _h}
+    base = {
+        "drive": dict(fs_rec=1000, fs_ctrl=1000),
+        "tmf": dict(fs=2000),
+        "thermal": dict(dt=10.0, hours_cal=12.0, hours_val=6.0, dwell_s=1800.0),
+    }
+    for fam, kinds in OUT_OF_LIBRARY.items():
+        for kind in kinds:
+            for label, size in zip(("small", "large"), OOL_SIZES[fam][kind]):
+                c = make[fam](f"ool-{kind}-{label}", [], f"ool-{kind}", size=size, **base[fam])
+                out.append(dataclasses.replace(c, effects=(f"ool:{kind}",), primary=None))
+    return out
+
+
 def select(all_cases: list[Case], n: int | None = None, family: str | None = None) -> list[Case]:
     """A deterministic, representative subset: per family, effect-free and effect cases
     interleaved (every fourth case effect-free while any remain), the effect cases taking
@@ -1534,20 +1725,20 @@ def main(argv=None) -> int:
     p.add_argument("--write", default=None, help="folder: write every case as .npz files")
     p.add_argument("--only", default=None, help="comma-separated case names")
     args = p.parse_args(argv)
-    all_cases = cases()
+    chosen = all_cases()
     if args.only:
         names = set(args.only.split(","))
-        unknown = names - {c.name for c in all_cases}
+        unknown = names - {c.name for c in chosen}
         if unknown:
             raise SystemExit(f"unknown case(s) {sorted(unknown)}")
-        all_cases = [c for c in all_cases if c.name in names]
-    n_free = sum(c.effect_free for c in all_cases)
-    print(f"{len(all_cases)} cases, {n_free} effect-free ({100 * n_free / len(all_cases):.0f} %)")
+        chosen = [c for c in chosen if c.name in names]
+    n_free = sum(c.effect_free for c in chosen)
+    print(f"{len(chosen)} cases, {n_free} effect-free ({100 * n_free / len(chosen):.0f} %)")
     if args.write:
-        for c in all_cases:
+        for c in chosen:
             print(c.name, len(write_case(c, args.write)), "files")
         return 0
-    for c in all_cases:
+    for c in chosen:
         t0 = time.perf_counter()
         cal, val, info = generate(c)
         dt = time.perf_counter() - t0

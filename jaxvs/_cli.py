@@ -444,6 +444,7 @@ def _diagnose(args) -> int:
     folder.commit()
     print(report.to_markdown())
     print(f"written: {out / 'report.json'}, {out / 'report.md'}, {out / 'report.html'}")
+    print(report.status_line)
     return EXIT_OK
 
 

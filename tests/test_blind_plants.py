@@ -346,3 +346,62 @@ def test_write_case_round_trip(bp, tmp_path):
         assert back.dt == pytest.approx(rec.dt, rel=1e-12)
     truth = json.loads((tmp_path / c.name / "truth.json").read_text())
     assert truth["effects"] == ["position_dependence"] and truth["truth"] == info["truth"]
+
+
+def test_out_of_library_cases(bp):
+    """Four effects per family in no library, each at two sizes; no library name."""
+    ool = bp.out_of_library()
+    names = {c.name for c in bp.cases()}
+    assert not names & {c.name for c in ool}
+    assert [c.name for c in bp.all_cases()] == [c.name for c in bp.cases() + ool]
+    for fam in ("drive", "tmf", "thermal"):
+        fc = [c for c in ool if c.family == fam]
+        assert len({c.variant for c in fc}) >= 4 and len(fc) == 2 * len({c.variant for c in fc})
+        for c in fc:
+            assert c.out_of_library and not c.effect_free and c.primary is None
+            assert all(e.startswith("ool:") for e in c.effects)
+            assert not set(c.effects) & EFFECT_NAMES[fam]
+        sizes = {}
+        for c in fc:
+            sizes.setdefault(c.variant, []).append(c.settings["size"])
+        assert all(len(v) == 2 and v[0] < v[1] for v in sizes.values())
+
+
+def test_out_of_library_mode_integrator_is_the_linear_mode_at_size_zero(bp):
+    """The step-by-step modal integrator of the out-of-library tmf plants (Runge–Kutta on
+    the 8× grid, relative to the root motion) against the exact first-order-hold filter
+    of the linear modes: at size zero the Duffing, joint-friction and drifting plants are
+    the linear structure (within 0.1 % of the modal response's RMS; RK4 at ω dt ≈ 0.02
+    and the root velocity by central differences leave about 2e-5)."""
+    fs, os_ = 2000.0, 8
+    dt = 1.0 / (fs * os_)
+    rng = np.random.default_rng(5)
+    x_e = ss.sosfilt(ss.butter(4, 0.4 * fs, fs=1 / dt, output="sos"), rng.standard_normal(40000))
+    x_e = 1e-5 * x_e / np.std(x_e) * bp._smoothstep(np.arange(x_e.size) / 2000)  # from rest
+    modes = [(60.0, 0.03, 1.566), (376.0, 0.04, -0.867)]
+    exact = bp.tmf_response(x_e, dt, modes)
+    for variant in ("ool-duffing", "ool-joint", "ool-drift"):
+        case = bp.Case("t", "tmf", ("ool:x",), None, variant, {"size": 0.0})
+        got = bp._tmf_out_of_library(case, x_e, dt, modes)
+        assert np.std(got - exact) < 1e-3 * np.std(exact - x_e), variant
+    # and a size changes it: the cubic sensor error of size c adds c·d³/var(d)
+    case = bp.Case("t", "tmf", ("ool:sensor",), None, "ool-sensor", {"size": 0.1})
+    got = bp._tmf_out_of_library(case, x_e, dt, modes)
+    d = exact - exact.mean()
+    np.testing.assert_allclose(got - exact, 0.1 * d**3 / np.var(d), rtol=1e-12, atol=1e-20)
+
+
+def test_out_of_library_thermal_size_is_in_noise_units(bp):
+    """The thermal out-of-library terms have an RMS of `size` times the sensor noise: the
+    case generated with and without the term (same seed) differs by exactly that."""
+    for kind in ("drift", "step", "interaction", "neighbour"):
+        case = next(c for c in bp.out_of_library() if c.name == f"thermal-ool-{kind}-small")
+        cal, _, _ = bp.generate(case)
+        quiet = _quiet(case, noise=0.0)
+        calq, _, _ = bp.generate(quiet)
+        free = dataclasses.replace(quiet, variant="none", effects=())
+        cal0, _, _ = bp.generate(free)
+        add = np.asarray(calq[0]["T_bearing"]) - np.asarray(cal0[0]["T_bearing"])
+        # noise 0 makes the term 0: size × noise with noise = 0
+        assert np.allclose(add, 0.0)
+        assert np.std(np.asarray(cal[0]["T_bearing"])) > 0

@@ -130,7 +130,7 @@ def test_drive_coulomb_named_and_sized():
 
 
 @pytest.mark.slow
-def test_drive_effect_free_twin_gives_no_effect(tmp_path):
+def test_drive_effect_free_twin_gives_no_effect(tmp_path, capsys):
     """An effect-free twin with perturbed parameters: the nominal recalibration absorbs
     the parameter error and nothing is reported; also the CLI end to end on CSV files."""
     _, cal, val = _drive_data(None, 5)
@@ -150,11 +150,17 @@ def test_drive_effect_free_twin_gives_no_effect(tmp_path):
             "--max-effects",
             "1",
             "--quiet",
-        ]
+        ],
     )
     assert rc == 0
+    # the verdict's state is the CLI's last line and the report's first
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("verdict: adequate")
+    assert (out / "report.md").read_text().splitlines()[2] == f"**{last}**"
     rep = json.loads((out / "report.json").read_text())
     assert rep["family"] == "drive"
+    assert rep["verdict"]["status"] == "adequate" and rep["verdict"]["adequate"] is True
+    assert rep["verdict"]["remainder"]["within_null"] and not rep["verdict"]["remainder"]["where"]
     assert set(rep["gap"]) >= {"metric", "calibration", "validation", "noise_floor"}
     assert rep["gap"]["metric"] == "nrmse"
     assert rep["verdict"]["effects"] == []
@@ -176,7 +182,8 @@ def test_drive_effect_free_twin_gives_no_effect(tmp_path):
             "parameters",
         }
         assert not c["accepted"]
-    for f in ("report.md", "gap_map.png", "before_after.png", "residual_spectra.png"):
+    figures = ("verdict.png", "gap_map.png", "before_after.png", "residual_spectra.png")
+    for f in ("report.md", *figures):
         assert (out / f).exists()
 
 
@@ -190,6 +197,8 @@ def test_emps_diagnosis_names_coulomb_then_asymmetric(shared_data):
         d / "DATA_EMPS.mat", d / "DATA_EMPS_PULSES.mat", family="drive", max_effects=2
     )
     assert rep.verdict["effects"][:2] == ["coulomb_friction", "asymmetric_friction"]
+    assert rep.verdict["status"] in ("explained", "partly_explained")
+    assert rep.verdict["adequate"] is False
     coulomb = next(c for c in rep.candidates if c["effect"] == "coulomb_friction")
     assert coulomb["parameters"]["Fc"] == pytest.approx(20.3935, rel=0.05)
     assert rep.gap["validation"] > 2 * rep.verdict["validation_gap"]

@@ -79,6 +79,10 @@ def test_effect_free_twin_accepts_nothing_and_reports_untestable(effect_free):
     assert rep.gap["validation"] == pytest.approx(rep.gap["noise_floor"], rel=0.3)
     json = rep.to_json()
     assert json["family"] == "thermal" and json["verdict"]["effects"] == []
+    # nothing accepted and the remainder within the null: adequate, said first
+    assert json["verdict"]["status"] == "adequate" and json["verdict"]["adequate"] is True
+    assert repr(rep).splitlines()[1].startswith("verdict: adequate")
+    assert rep.to_markdown().splitlines()[2].startswith("**verdict: adequate")
 
 
 @pytest.mark.parametrize(
@@ -96,6 +100,8 @@ def test_typical_effect_is_found_first_and_closes_the_gap(
 ):
     rep = jaxvs.diagnose(_record({effect: magnitude}), family="thermal")
     assert rep.verdict["effects"][:1] == [effect]
+    assert rep.verdict["status"] in ("explained", "partly_explained")
+    assert not rep.verdict["adequate"]
     found = next(c for c in rep.candidates if c["effect"] == effect)
     assert found["accepted"] and found["shrink"] > 0.5
     assert found["parameters"][parameter] == pytest.approx(expected, rel=rtol)

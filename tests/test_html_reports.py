@@ -141,7 +141,7 @@ def test_diagnose_report_html(diagnosis):
     assert rep.verdict["effects"] == ["dynamics"]  # the report has a verdict to show
     content = json.loads((out / "report.json").read_text())
     page = assert_self_contained_report(out, rounds=content["rounds"])
-    assert len(page.images) == 4
+    assert len(page.images) == 5  # the verdict, gap map, signatures, before/after, spectra
     # the candidates table holds the JSON's candidates, best first
     cand = next(t for t in page.tables if t[0][0] == "effect" and "testable" in t[0])
     assert [r[0] for r in cand[1:]] == [c["effect"] for c in content["candidates"]]

@@ -21,6 +21,7 @@ from ..data import (
     split_blocks,
 )
 from ._base import AbstractFamily, NotIdentifiable
+from ._distortion import nonlinear_distortion
 from ._drive import DriveFamily
 from ._engine import search
 from ._gapmap import gap_map
@@ -29,6 +30,7 @@ from ._report import DiagnosisReport
 from ._stats import block_length, gap_change_interval, nrmse
 from ._thermal import ThermalFamily
 from ._tmf import TMFFamily
+from ._verdict import decide, status_line
 
 __all__ = ["FAMILIES", "diagnose"]
 
@@ -315,7 +317,8 @@ def diagnose(
     white = math.sqrt(sum(e.noise_var * e.n for e in res.validation) / float(np.sum(y_val**2)))
 
     cells = gap_map(exps, r0, q=fdr, seed=seed)
-    cells_after = {c.label: c for c in gap_map(exps, r1, q=fdr, seed=seed)}
+    cells_after_list = gap_map(exps, r1, q=fdr, seed=seed)
+    cells_after = {c.label: c for c in cells_after_list}
     where = []
     for c in cells:
         if not c.significant:
@@ -348,6 +351,18 @@ def diagnose(
     )
     if not res.accepted:
         g1, shrink, s_int = g0, 0.0, (0.0, 0.0)
+    state = decide(
+        res.accepted,
+        g1,
+        res.null_gaps,
+        noise,
+        [c.to_json() for c in cells_after_list],
+        fdr=fdr,
+    )
+
+    distortion = nonlinear_distortion(fam.name, exps)
+    if distortion.get("finding"):
+        state["remainder"]["findings"] = [distortion["finding"]]
 
     cands = list(res.candidates.values())
     order = {n: i for i, n in enumerate(res.accepted)}
@@ -400,12 +415,14 @@ def diagnose(
             "target": fam.target_label,
         },
         "not_identifiable": None,
+        "distortion": distortion,
         "check": checked,
         "warnings": list(checked["warnings"]),
         "where": where,
         "where_after": where_after,
         "candidates": cand_json,
         "verdict": {
+            "status": state["status"],
             "effects": list(res.accepted),
             "final_effects": list(res.final.effect_names),
             "primary": primary,
@@ -414,7 +431,8 @@ def diagnose(
             "shrink": shrink,
             "shrink_interval": list(s_int),
             "remaining_over_noise": g1 / noise if noise > 0 else None,
-            "adequate": not res.accepted,
+            "adequate": state["adequate"],
+            "remainder": state["remainder"],
             "parameters": {
                 "nominal": fam.nominal_parameters(res.final),
                 **{e.name: e.parameters() for e in res.final.effects},
@@ -434,10 +452,8 @@ def diagnose(
         "pruning": res.pruning,
         "timing": {"seconds": time.perf_counter() - t_start},
     }
-    say(
-        "done: "
-        + (", ".join(res.accepted) if res.accepted else "no effect found (adequate up to noise)")
-    )
+    content["verdict"]["status_line"] = status_line(content["verdict"])
+    say("done: " + content["verdict"]["status_line"])
     return DiagnosisReport(
         content,
         nominal_model=res.nominal,

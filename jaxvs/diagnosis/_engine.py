@@ -15,8 +15,10 @@
    (`effect.admissible`); an inadmissible best fit is reported, never accepted.
 4. A candidate passes when, on held-out experiments the calibration never saw, its gap
    reduction has a moving-block bootstrap interval excluding zero, removes at least
-   `min_shrink` of the gap, has ΔBIC > `min_delta_bic` with an effective sample size,
-   and exceeds what the same candidate, from the same start, gains on the null records
+   `min_shrink` of the gap, has ΔBIC > `min_delta_bic` with an effective sample size
+   (that of the residual it leaves, never below that of the noise on the null records:
+   a large effect partly explained leaves structure that must not discount its own
+   evidence), and exceeds what the same candidate, from the same start, gains on the null records
    (`null_threshold`). Among those that pass, a base goes before its own extension
    (marginality), otherwise the largest held-out reduction wins. Effects are added
    greedily until none passes; the primary effect is the one that explains most of the
@@ -481,6 +483,28 @@ def null_threshold(gains: Sequence[float], level: float, tested: int) -> float:
     return max(float(np.quantile(g, level)), float(g.mean() + z * g.std(ddof=1)))
 
 
+def noise_sample_share(null_residuals: Sequence[Sequence[np.ndarray]]) -> float:
+    """The median share `N_eff / N` of independent samples in the residuals of the
+    effect-free records (each record's experiments concatenated): the evidence one sample
+    of the noise carries after the set-up's filters and loop. 0 without null records."""
+    shares = []
+    for rows in null_residuals:
+        e = np.concatenate([np.asarray(r, float) for r in rows])
+        if e.size >= 4:
+            shares.append(effective_samples(e) / e.size)
+    return float(np.median(shares)) if shares else 0.0
+
+
+def evidence_samples(residual: np.ndarray, noise_share: float) -> float:
+    """The effective sample size of the ΔBIC: that of the residual left by the model
+    under test, but never below what the noise alone carries (`noise_share · N`, from the
+    effect-free records). A candidate that removes a large share of a gap far above the
+    floor leaves structure behind; that structure must not make its evidence smaller
+    than that of a small effect leaving white noise."""
+    n = np.size(residual)
+    return float(max(effective_samples(residual), noise_share * n))
+
+
 def _nrmse_rows(res: Sequence[np.ndarray], exps: Sequence[Experiment]) -> float:
     return nrmse(np.concatenate(list(res)), np.concatenate([e.y for e in exps]))
 
@@ -587,6 +611,10 @@ def search(
     null_gaps = [_nrmse_rows(r[n_cal_exp:], ns[n_cal_exp:]) for r, ns in zip(null_res, null_sets)]
     noise_floor = float(np.median(null_gaps))
     null_models = list(null_fit)
+    # the evidence per sample of the noise: the effective share of independent samples in
+    # the calibration residuals of the effect-free records (what the noise and the
+    # set-up's filters leave, not what a missing effect leaves)
+    noise_share = noise_sample_share([r[:n_cal_exp] for r in null_res])
     say(f"noise floor (median gap of the nominal model on the null records): {noise_floor:.4g}")
 
     dof0 = _dof(model, exps[:n_cal_exp])
@@ -674,10 +702,13 @@ def search(
             c.shrink = shrink
             c.shrink_interval = s_int
             c.reduction_interval = d_int
-            # effective sample size from the candidate's own residual: under the
-            # alternative it is what is left (noise); the nominal residual is correlated
-            # by the very effect under test, which would discount real evidence
-            n_eff = effective_samples(np.concatenate(r1[:n_cal_exp]))
+            # effective sample size: the candidate's own residual is what is left under the
+            # alternative, but when the candidate removes only part of a large gap, what is
+            # left is still structured and its correlation time would discount real
+            # evidence the more, the larger the gap; the noise's own correlation (the null
+            # records') bounds it from below. The held-out bootstrap and the null decide;
+            # ΔBIC guards the complexity
+            n_eff = evidence_samples(np.concatenate(r1[:n_cal_exp]), noise_share)
             c.delta_bic = bic_effective(ssr0, n_cal, dof0, n_eff) - bic_effective(
                 ssr1, n_cal, dof_s, n_eff
             )
@@ -793,6 +824,7 @@ def search(
         candidates,
         specs,
         nominal_residuals,
+        noise_share=noise_share,
         min_shrink=min_shrink,
         min_delta_bic=min_delta_bic,
         n_boot=n_boot,
@@ -823,6 +855,7 @@ def _prune(
     specs: Mapping[str, EffectSpec],
     nominal_residuals: Sequence[np.ndarray],
     *,
+    noise_share: float,
     min_shrink: float,
     min_delta_bic: float,
     n_boot: int,
@@ -848,7 +881,7 @@ def _prune(
         r_cal = np.concatenate(res_all[:n_cal_exp])
         ssr_full = float(np.sum(r_cal**2))
         dof_full = _dof(model, exps[:n_cal_exp])
-        n_eff = effective_samples(r_cal)
+        n_eff = evidence_samples(r_cal, noise_share)
         tests = []
         for eff in model.effects:
             reduced = GapModel(model.nominal, tuple(e for e in model.effects if e is not eff))

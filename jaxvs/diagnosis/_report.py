@@ -14,6 +14,7 @@ from .._html import markdown_to_html, report_html
 from .._misc import json_safe
 from ._base import Experiment, GapModel
 from ._gapmap import GapCell
+from ._verdict import status_line
 
 __all__ = ["DiagnosisReport"]
 
@@ -26,9 +27,14 @@ class DiagnosisReport:
     **Fields (JSON):** `family`, `gap` (`metric`, `calibration`, `validation`,
     `noise_floor`), `where` (significant gap-map cells, most concentrated first),
     `candidates` (best first; each with `admissible`, `reason`, `null_p95`,
-    `null_threshold`, `rejected_by`), `verdict` (`effects` in the order added,
-    `final_effects`, `primary`, `validation_gap`, `shrink`, `shrink_interval`, `adequate`;
-    `None` when the record cannot identify the nominal model), `not_identifiable` (the
+    `null_threshold`, `rejected_by`), `verdict` (`status`: `adequate`, `explained`,
+    `partly_explained` or `unexplained`; `status_line`; `effects` in the order added,
+    `final_effects`, `primary`, `validation_gap`, `shrink`, `shrink_interval`, `adequate`
+    (true only for `adequate`), `remainder` (`gap`, `over_floor`, `null_p95`,
+    `within_null`, `where`: the strongest cells of the final residual's gap map with
+    their share and test); `None` when the record cannot identify the nominal model),
+    `distortion` (records that repeat their excitation: the noise measured from period to
+    period and the nonlinear distortion level, a finding when above the noise), `not_identifiable` (the
     reason, or `None`), `nominal`, `data`, `rounds`, `pruning` (every effect of the final
     model tested against the final model without it: `effect`, `effects`, `gap_without`,
     `gap_with`, `reduction`, `reduction_interval`, `shrink`, `delta_bic`,
@@ -71,6 +77,29 @@ class DiagnosisReport:
     def verdict(self) -> dict[str, Any]:
         return self.content["verdict"]
 
+    @property
+    def status(self) -> str | None:
+        """`adequate`, `explained`, `partly_explained`, `unexplained`, or `None` (no
+        verdict: the record cannot identify the nominal model)."""
+        v = self.content.get("verdict")
+        return None if v is None else v.get("status")
+
+    @property
+    def status_line(self) -> str:
+        """The verdict in one line (printed first by the report and the CLI)."""
+        return status_line(self.content.get("verdict"), self.content.get("not_identifiable"))
+
+    def __repr__(self) -> str:
+        c = self.content
+        g = c.get("gap") or {}
+        lines = [f"DiagnosisReport(family={c.get('family')!r})", self.status_line]
+        if g:
+            lines.append(
+                f"held-out gap {_num(g.get('validation'))} (nominal), noise floor "
+                f"{_num(g.get('noise_floor'))}; report.to_markdown() for the whole report"
+            )
+        return "\n".join(lines)
+
     def to_json(self) -> dict[str, Any]:
         """The report as a JSON-ready dictionary (the schema of DESIGN.md §3.2)."""
         return json_safe(self.content)
@@ -81,6 +110,8 @@ class DiagnosisReport:
             return "\n".join(
                 [
                     f"# Sim-to-real gap diagnosis — family `{c['family']}`",
+                    "",
+                    f"**{self.status_line}**",
                     "",
                     f"Nominal model: {c['nominal']['model']}.",
                     "",
@@ -97,12 +128,15 @@ class DiagnosisReport:
         lines = [
             f"# Sim-to-real gap diagnosis — family `{c['family']}`",
             "",
+            f"**{self.status_line}**",
+            "",
             f"Nominal model: {c['nominal']['model']}.",
             "",
             *_warnings_markdown(c),
             "## Verdict",
             "",
         ]
+        status = v.get("status")
         if v["effects"]:
             lines.append(
                 f"Missing effect(s), in the order added: **{', '.join(v['effects'])}**. "
@@ -111,14 +145,26 @@ class DiagnosisReport:
                 f"[{v['shrink_interval'][0]:.2f}, {v['shrink_interval'][1]:.2f}]); "
                 f"noise floor {pct(g['noise_floor'])}."
             )
+        elif status == "unexplained":
+            lines.append(
+                "No candidate effect passed (an admissible fit whose held-out gap reduction "
+                "has a bootstrap interval excluding zero and exceeds what it gains on "
+                "effect-free records of the same set-up), yet the held-out gap is above "
+                "what the nominal model leaves on those records: the record shows an effect "
+                f"that is not in the library. Validation gap {pct(g['validation'])}, noise "
+                f"floor {pct(g['noise_floor'])}."
+            )
         else:
             lines.append(
                 "No candidate effect passed (an admissible fit whose held-out gap reduction "
                 "has a bootstrap interval excluding zero and exceeds what it gains on "
-                "effect-free records of the same set-up): the nominal model is adequate up to "
-                f"the noise floor and the effects tested. Validation gap {pct(g['validation'])}, noise floor "
-                f"{pct(g['noise_floor'])}."
+                "effect-free records of the same set-up) and the held-out gap lies within "
+                "what the nominal model leaves on those records: the nominal model is "
+                f"adequate up to the noise floor. Validation gap {pct(g['validation'])}, "
+                f"noise floor {pct(g['noise_floor'])}."
             )
+        lines += _remainder_markdown(v)
+        lines += _distortion_markdown(c.get("distortion"))
         lines += [
             "",
             "## Gap (metric: normalised RMS error of the target)",
@@ -217,6 +263,59 @@ def _num(value: Any, fmt: str = ".3g") -> str:
     if value is None or (isinstance(value, float) and not np.isfinite(value)):
         return "—"
     return format(value, fmt)
+
+
+def _remainder_markdown(v: dict[str, Any]) -> list[str]:
+    """The remainder against the floor and the null and, above the null, where it lies."""
+    rem = v.get("remainder")
+    if not rem:
+        return []
+    over = _num(rem.get("over_floor"))
+    p95 = _num(rem.get("null_p95_over_floor"))
+    bound = _num(rem.get("threshold_over_floor"))
+    tol = rem.get("tolerance")
+    lines = [
+        "",
+        f"Remaining held-out gap: {over}× the noise floor; the null's 95th percentile is "
+        f"{p95}×, the bound with the noise level's uncertainty "
+        f"({'—' if tol is None else f'{100 * tol:.0f} %'}) {bound}× (state "
+        f"`{v.get('status')}`, {'within' if rem.get('within_null') else 'above'} the null).",
+    ]
+    if rem.get("where"):
+        lines += [
+            "",
+            "### Where the remainder lies",
+            "",
+            "| axis | cell | share of remainder | share of samples | p-value |",
+            "|---|---|---|---|---|",
+        ]
+        for w in rem["where"]:
+            lines.append(
+                f"| {w['axis']} | {w['label']} | {w['share']:.2f} | {w['fraction']:.2f} | "
+                f"{w['p_value']:.2g} |"
+            )
+        lines += ["", f"Test: {rem['where'][0]['test']}."]
+    elif not rem.get("within_null"):
+        lines += ["", "No time window or operating point concentrates the remainder."]
+    return lines
+
+
+def _distortion_markdown(d: dict[str, Any] | None) -> list[str]:
+    """The noise measured from repeated periods and the nonlinear distortion level."""
+    if not d or not d.get("available"):
+        return []
+    lines = [
+        "",
+        "### Measured noise and nonlinear distortion (repeated periods)",
+        "",
+        f"{d['periods']} period(s) of {d['period_samples']} samples of `{d['input']}` in "
+        f"{d['realisations']} realisation(s); {d['method']}: noise "
+        f"{100 * d['noise_level']:.3g} %, distortion {100 * d['distortion_level']:.3g} % of "
+        f"the RMS of `{d['output']}` ({_num(d['distortion_over_noise'])}× the noise).",
+    ]
+    if d.get("finding"):
+        lines += ["", f"**Finding: {d['finding']}.**"]
+    return lines
 
 
 def _warnings_markdown(c: dict[str, Any]) -> list[str]:

@@ -50,7 +50,7 @@ from jaxtyping import Array, Float
 from ..calibration import Positive, fit_rational, fixed, unwrap
 from ..data import Record
 from ..models import RationalTF, StableTMF, partial_fractions, section_poles, simulate_modal
-from ..signal import transmissibility
+from ..signal import find_period, period_noise, transmissibility
 from ._base import (
     AbstractAdditiveEffect,
     AbstractEffect,
@@ -667,6 +667,20 @@ def _pole_basis(nominal: StableTMF, u: np.ndarray) -> np.ndarray:
     return np.stack(cols, axis=1)
 
 
+def periodic_noise(
+    xe: np.ndarray, xt: np.ndarray, resolution: float = 0.0
+) -> tuple[float, float] | None:
+    """The noise of `x_t` from its period-to-period variation when `x_e` repeats in at
+    least two whole periods (the first dropped as a transient when there are three or
+    more): variance (less the quantisation `Δ²/12`) and lag-one autocorrelation; `None`
+    for a record that does not repeat."""
+    period = find_period(xe, rtol=1e-3)
+    if period is None:
+        return None
+    var, rho, _ = period_noise(xt, period)
+    return max(var - resolution**2 / 12.0, 0.0), float(np.clip(rho, 0.0, 0.99))
+
+
 def record_noise(exp: Experiment, models: Sequence[StableTMF], taps: int) -> tuple[float, float]:
     """The measurement noise of one experiment's `x_t`: variance and lag-one
     autocorrelation of what no linear time-invariant map of the inputs explains.
@@ -680,7 +694,12 @@ def record_noise(exp: Experiment, models: Sequence[StableTMF], taps: int) -> tup
     time-invariant within one experiment (one position y), so on a record with an effect
     the estimate is still the noise, not the gap. The variance is corrected for the
     fitted parameters and less the record's own quantisation `Δ²/12` (the null quantises
-    its records again)."""
+    its records again). A record whose `x_e` repeats in periods gives the noise from the
+    measurement instead ([`periodic_noise`][]): what changes from period to period, which
+    no nonlinearity can hide in."""
+    measured = periodic_noise(np.asarray(exp.arrays["x_e"], float), exp.y, exp.resolution)
+    if measured is not None:
+        return measured
     xe = np.asarray(exp.arrays["x_e"], float)
     f = np.asarray(exp.arrays["f"], float)
     has_f = "f" in exp.signals and float(np.ptp(f)) > 0
@@ -762,7 +781,11 @@ class TMFFamily(AbstractFamily):
         f0 = np.full(n, f[0])  # the force at the start (see ProcessForce)
         f = f - f[0]
         taps = int(self.options.get("fir_taps", 150))
-        noise_var = _fir_noise_var(xe, xt, f if has_f and np.ptp(f) > 0 else None, taps)
+        measured = periodic_noise(xe, xt)
+        if measured is not None:
+            noise_var = measured[0]
+        else:
+            noise_var = _fir_noise_var(xe, xt, f if has_f and np.ptp(f) > 0 else None, taps)
         w = max(4, int(round(0.05 / record.dt)))
         amp = np.sqrt(np.convolve((xe - xe.mean()) ** 2, np.ones(w) / w, mode="same"))
         ops = {"position y [m]": np.full(n, pos), "x_e amplitude [m]": amp}

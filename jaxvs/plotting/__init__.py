@@ -2,7 +2,11 @@
 
 from ._bode import bode_plot as bode_plot
 from ._design import plot_design as plot_design
-from ._diagnosis import plot_diagnosis as plot_diagnosis
+from ._diagnosis import (
+    plot_bla as plot_bla,
+    plot_diagnosis as plot_diagnosis,
+    plot_verdict as plot_verdict,
+)
 from ._discover import plot_discovered as plot_discovered
 from ._drive import (
     ballbar_plot as ballbar_plot,

@@ -1,5 +1,6 @@
-"""Figures of a sim-to-real gap diagnosis: gap map, residual against the signature
-regressors, before/after overlays and residual spectra."""
+"""Figures of a sim-to-real gap diagnosis: the verdict against the null, gap map, residual
+against the signature regressors, before/after overlays, residual spectra, and the noise /
+nonlinear-distortion split of a best linear approximation."""
 
 from __future__ import annotations
 
@@ -9,7 +10,14 @@ import matplotlib.pyplot as plt
 import numpy as np
 import scipy.signal as ss
 
-__all__ = ["plot_diagnosis"]
+__all__ = ["plot_bla", "plot_diagnosis", "plot_verdict"]
+
+_STATE_COLOURS = {
+    "adequate": "C2",
+    "explained": "C0",
+    "partly_explained": "C1",
+    "unexplained": "C3",
+}
 
 
 def _validation_slices(report):
@@ -122,8 +130,93 @@ def plot_spectra(report, ax=None):
     return ax
 
 
+def plot_verdict(report, ax=None, *, title: str | None = None):
+    """The verdict's state: the held-out gaps the nominal model leaves on the effect-free
+    null records (dots), the bound of the null (its 95th percentile widened by the noise
+    level's uncertainty, dashed), the nominal model's held-out gap and the remainder after
+    the accepted effects (the marker coloured by the state), all in units of the noise
+    floor.
+
+    **Arguments:** `report` a `DiagnosisReport`; `ax` a matplotlib axis (created when
+    `None`); `title` (default: the state and the effects).
+
+    **Returns:** the axis.
+    """
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6.5, 2.6))
+    g, v = report.gap, report.verdict
+    rem = v.get("remainder") or {}
+    floor = g["noise_floor"] or 1.0
+    null = np.asarray(g.get("null_gaps") or [], float) / floor
+    rng = np.random.default_rng(0)
+    ax.scatter(null, 0.1 * rng.uniform(-1, 1, null.size), s=14, color="C7", label="null records")
+    if rem.get("threshold_over_floor") is not None:
+        ax.axvline(rem["threshold_over_floor"], color="k", ls="--", lw=1, label="null bound")
+    state = v.get("status") or "adequate"
+    col = _STATE_COLOURS.get(state, "k")
+    nominal = g["validation"] / floor
+    final = v["validation_gap"] / floor
+    if v.get("effects"):
+        ax.scatter([nominal], [0.0], marker="o", s=60, facecolors="none", edgecolors=col,
+                   label="nominal model")  # fmt: skip
+        ax.annotate("", (final, 0.0), (nominal, 0.0),
+                    arrowprops={"arrowstyle": "->", "color": col})  # fmt: skip
+    ax.scatter([final], [0.0], marker="D", s=60, color=col, label="remaining gap")
+    ax.set_xscale("log")
+    lo = min([0.8, *null.tolist(), final])
+    hi = max([2.0, nominal, final, rem.get("threshold_over_floor") or 1.0]) * 1.5
+    ax.set_xlim(lo * 0.8, hi)
+    ax.set_ylim(-0.5, 0.5)
+    ax.set_yticks([])
+    ax.set_xlabel("held-out gap / noise floor")
+    effects = ", ".join(v.get("effects") or []) or "no effect"
+    ax.set_title(title or f"{state.replace('_', ' ')} ({effects})", color=col, fontsize=10)
+    ax.legend(fontsize=7, loc="upper left", ncol=2)
+    return ax
+
+
+def plot_bla(bla, fs: float = 1.0, ax=None):
+    """A best linear approximation's split of what it does not explain: the output's
+    power at the excited lines (the BLA), the noise (from period to period) and the
+    nonlinear distortion (from realisation to realisation, or at the lines the excitation
+    leaves empty), per DFT line of one period.
+
+    **Arguments:** `bla` a `jaxvs.signal.BLA`; `fs` the sampling rate [Hz] (1: lines in
+    cycles per sample); `ax` a matplotlib axis.
+
+    **Returns:** the axis.
+    """
+    if ax is None:
+        _, ax = plt.subplots(figsize=(7, 4))
+    n = bla.period_samples
+    k_all = np.arange(bla.y_noise_var.size)
+    f_all = k_all * fs / n
+    lines = bla.lines
+    f = lines * fs / n
+    db = lambda x: 10 * np.log10(np.maximum(np.asarray(x, float), 1e-300))  # noqa: E731
+    # the lines not excited where the output's power stands above its noise
+    free = ~np.isin(k_all, lines) & (k_all > 0) & (bla.y_excess > bla.y_noise_var / bla.periods)
+    ax.plot(f_all[free], db(bla.y_excess[free]), ".", color="C1", ms=3,
+            label="output at lines not excited (above the noise)")  # fmt: skip
+    ax.plot(f, db(bla.y_noise_var[lines]), "-", color="C7", lw=1, label="noise (period to period)")
+    if np.isfinite(bla.y_distortion_var).any():
+        ax.plot(f, db(bla.y_distortion_var), "-", color="C3", lw=1.5,
+                label="nonlinear distortion (realisations)")  # fmt: skip
+    low = float(np.min(db(bla.y_noise_var[lines])))
+    ax.set_ylim(bottom=low - 15.0)
+    ax.set_xlabel("frequency [Hz]" if fs != 1.0 else "frequency [cycles/sample]")
+    ax.set_ylabel("power per line [dB]")
+    ax.set_title(
+        f"noise {bla.noise_level:.3g}, distortion {bla.distortion_level:.3g} "
+        f"({bla.realisations} realisation(s) × {bla.periods} periods)",
+        fontsize=10,
+    )
+    ax.legend(fontsize=8)
+    return ax
+
+
 def plot_diagnosis(report, out) -> list[str]:
-    """Write the four figures of a diagnosis report as PNG files into `out`.
+    """Write the five figures of a diagnosis report as PNG files into `out`.
 
     **Arguments:**
 
@@ -136,6 +229,7 @@ def plot_diagnosis(report, out) -> list[str]:
     out.mkdir(parents=True, exist_ok=True)
     names = []
     for fname, draw in (
+        ("verdict.png", lambda: plot_verdict(report).figure),
         ("gap_map.png", lambda: plot_gap_map(report).figure),
         ("residual_signatures.png", lambda: plot_signatures(report)),
         ("before_after.png", lambda: plot_before_after(report)),

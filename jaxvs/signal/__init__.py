@@ -1,5 +1,6 @@
 """Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows,
-filtering, resampling, the moving-block bootstrap of autocorrelated series."""
+filtering, resampling, the moving-block bootstrap of autocorrelated series, the best linear
+approximation of a system under periodic excitation."""
 
 from ._basis import (
     bspline_basis as bspline_basis,
@@ -12,6 +13,13 @@ from ._bootstrap import (
     block_bootstrap_means as block_bootstrap_means,
     block_length as block_length,
     integrated_time as integrated_time,
+)
+from ._bla import (
+    BLA as BLA,
+    best_linear_approximation as best_linear_approximation,
+    find_period as find_period,
+    period_noise as period_noise,
+    settled_periods as settled_periods,
 )
 from ._cwt import (
     CWTDamping as CWTDamping,
