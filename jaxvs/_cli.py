@@ -1,6 +1,6 @@
 """The `jaxvs` command.
 
-Exit codes (DESIGN.md §3): 0 done; 2 user error (one line `jaxvs: error: ...` on stderr
+Exit codes (docs/guides/contracts.md): 0 done; 2 user error (one line `jaxvs: error: ...` on stderr
 naming the problem and the fix; `--debug` adds the traceback); 3 the data cannot identify
 the family's nominal model (`diagnose`, `check`; a report is still written); 130
 interrupted (Ctrl-C: one line saying what was and was not written); 1 an internal error
@@ -203,6 +203,13 @@ def _parser() -> argparse.ArgumentParser:
     diag.add_argument("--order", type=_int_at_least(1), default=None, help="tmf: TMF order")
     diag.add_argument(
         "--cutoff-hz", type=_positive_float, default=None, help="drive: low-pass cut-off [Hz]"
+    )
+    diag.add_argument(
+        "--discover",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="after the named search, when the remainder stays above the null, look for an "
+        "effect outside the library: a flexible term, then its formula (default: on)",
     )
     _add(diag, ("option", "no_figures", "quiet", *_READS_DATA))
 
@@ -423,6 +430,7 @@ def _diagnose(args) -> int:
         max_effects=args.max_effects,
         seed=args.seed,
         progress=not args.quiet,
+        discover=args.discover,
         **options,
     )
     staging = folder.prepare()

@@ -1,5 +1,5 @@
 """Bad-input matrix, calibration and fitting: residuals that turn NaN on the way, zero or
-bad weights, degenerate data, bad options (issue 15; row format in `tests/bad_input.py`).
+bad weights, degenerate data, bad options (row format in `tests/bad_input.py`).
 
 The problems are tiny (one or two parameters, 20 samples) so the whole file runs in
 seconds; each row checks the refusal or the answer, never only that "something" happened.

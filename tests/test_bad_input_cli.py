@@ -1,5 +1,5 @@
 """Bad-input matrix, CLI rows: every sub-command of `jaxvs` against bad paths, options and
-files (DESIGN.md §3, §6).
+files (docs/guides/contracts.md, docs/guides/refusals.md).
 
 A refusal is exit code 2 with exactly one line `jaxvs: error: ...` on stderr that names the
 problem and the fix, no traceback, and nothing written. The rows run `jaxvs._cli.main`

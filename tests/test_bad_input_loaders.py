@@ -1,5 +1,5 @@
 """Bad-input matrix, loaders: every public loader against broken, truncated, mislabelled and
-borderline files (issue 15; row format in `tests/bad_input.py`).
+borderline files (row format in `tests/bad_input.py`).
 
 Each defect is written once as data and run through the format's own loader and through
 `jaxvs.data.load`, so both entry points get the same row. A refused file must name the file

@@ -1,6 +1,6 @@
 """Bad-input matrix, models and `simulate`: non-finite or impossible parameters, empty
 polynomials, inputs on the wrong axis, NaN initial states -- eagerly and under `jit`
-(issue 15; row format in `tests/bad_input.py`)."""
+(row format in `tests/bad_input.py`)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Bad-input matrix, data layer in Python: `Record`, units, splits, excitation signals and
-`FRFData` (issue 15; row format in `tests/bad_input.py`)."""
+`FRFData` (row format in `tests/bad_input.py`)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Bad-input matrix, signal processing (`jaxvs.signal`): NaN samples, wrong axes, rates and
-windows (issue 15; row format in `tests/bad_input.py`)."""
+windows (row format in `tests/bad_input.py`)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Smoke test of `benchmarks/tmf_study.py` (issue 5): its cheap pieces on small inputs.
+"""Smoke test of `benchmarks/tmf_study.py`: its cheap pieces on small inputs.
 
 The benchmark's `--quick` mode takes 1.5-2.5 min on the shared 2-core machine (compiles of
 the twin, route (a)/(b) fits, the family calibration), too long for a test; this runs its

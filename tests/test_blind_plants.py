@@ -13,7 +13,7 @@ import scipy.signal as ss
 
 PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "blind_plants.py"
 
-# DESIGN.md §3.2, effect names (exact strings) -- the oracle for the case list
+# docs/guides/contracts.md, effect names (exact strings) -- the oracle for the case list
 EFFECT_NAMES = {
     "drive": {
         "coulomb_friction",
@@ -66,7 +66,7 @@ def test_case_list(bp):
         for eff in names:
             variants = {c.variant for c in fc if eff in c.effects}
             assert len(variants) >= 2, (fam, eff, variants)
-        assert {e for c in fc for e in c.effects} == names  # only DESIGN names
+        assert {e for c in fc for e in c.effects} == names  # only contract names
         assert any(len(c.effects) == 2 for c in fc)
         for c in fc:
             assert (c.primary is None) == c.effect_free

@@ -63,7 +63,8 @@ def test_demo_end_to_end(tmp_path, capsys):
     assert (tmp_path / "rep" / "tmf_family_bode.png").stat().st_size > 10_000
     out = capsys.readouterr().out
     assert "TMF family" in out
-    # step 5: a sim-to-real diagnosis of the drive twin, with the DESIGN.md report schema
+    # step 5: a sim-to-real diagnosis of the drive twin, with the report schema
+    # of docs/guides/contracts.md
     diag = json.loads((tmp_path / "rep" / "diagnosis" / "report.json").read_text())
     assert diag["family"] == "drive"
     assert set(diag) >= {"gap", "where", "candidates", "verdict"}

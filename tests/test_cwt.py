@@ -67,7 +67,7 @@ def test_ridge_follows_a_chirp():
 def test_damping_single_mode_noiseless(f_n, zeta):
     t = DT * np.arange(5000)
     res = cwt_damping(_decay(t, f_n, zeta, phase=0.4), DT, (0.7 * f_n, 1.3 * f_n))
-    # target of issue 6: ζ within 10 %; noiseless decays give far better (< 1 %).
+    # target: ζ within 10 %; noiseless decays give far better (< 1 %).
     assert abs(float(res.zeta) - zeta) / zeta < 0.01
     wd = f_n * np.sqrt(1 - zeta**2)
     assert abs(float(res.frequency_hz) - wd) / wd < 0.01
@@ -80,7 +80,7 @@ def test_damping_two_modes_with_noise():
     x = x + 2e-3 * rng.standard_normal(t.size)  # noise 0.2 % of the first mode's amplitude
     for band, f_n, zeta in (((30, 55), 40.0, 0.02), ((85, 140), 110.0, 0.04)):
         res = cwt_damping(x, DT, band, omega0=12.0)
-        # issue 6: within 10 % of the true ζ on synthetic decays
+        # within 10 % of the true ζ on synthetic decays
         assert abs(float(res.zeta) - zeta) / zeta < 0.10
         assert abs(float(res.frequency_hz) - f_n) / f_n < 0.01
 

@@ -359,7 +359,7 @@ def test_emps_files(name):
     assert math.isclose(record.t[-1], 24.84, rel_tol=1e-9)
     np.testing.assert_allclose(record.t, raw["t"].ravel(), rtol=0, atol=1e-7)
     meta = record.metadata
-    # Gains quoted to the published digits (DESIGN.md §4).
+    # Gains quoted to the published digits (docs/guides/drive.md).
     assert math.isclose(meta["kp"], 160.18, abs_tol=5e-3)
     assert math.isclose(meta["kv"], 243.45, abs_tol=5e-3)
     assert math.isclose(meta["gtau"], 35.15, abs_tol=5e-3)
@@ -397,7 +397,7 @@ def test_emps_files(name):
 @pytest.mark.slow
 def test_emps_force_reproduces_published_idim_ls_estimate():
     """u = gtau·vir in N: least squares on M q̈ + Fv q̇ + Fc sign(q̇) + offset = u gives the
-    published IDIM-LS parameters (DESIGN.md §4: M = 95.1089 kg, Fv = 203.5034 N·s/m,
+    published IDIM-LS parameters (docs/guides/drive.md: M = 95.1089 kg, Fv = 203.5034 N·s/m,
     Fc = 20.3935 N, offset = −3.1648 N, relative force error 4.08 %)."""
     record = load(EMPS / "DATA_EMPS.mat")
     # Zero-phase 4th-order Butterworth at 20 Hz before differentiating; the paper decimates

@@ -1,4 +1,4 @@
-"""The virtual-sensor design assistant (issue 16): `jaxvs.design` and `jaxvs design`."""
+"""The virtual-sensor design assistant: `jaxvs.design` and `jaxvs design`."""
 
 import json
 
@@ -142,7 +142,7 @@ def test_design_recovers_inputs_and_round_trips(spindle, tmp_path):
     # the true inputs, no distractor
     assert set(best["inputs"]) == {"T_chassis", "v_m"}
     assert best["structure"] in ("lag", "arx", "tdnn")  # the twin lags (τ = 240 s)
-    # contract keys (DESIGN.md §3.4)
+    # contract keys (docs/guides/design.md)
     c = rep.to_json()
     for k in ("target", "metric", "designs", "best", "baseline", "candidates_evaluated"):
         assert k in c

@@ -26,7 +26,7 @@ from jaxvs.diagnosis._stats import (
 )
 from jaxvs.twins import DriveTwin, draw_drive_effect
 
-DESIGN_EFFECTS = {
+CONTRACT_EFFECTS = {
     "drive": (
         "coulomb_friction",
         "asymmetric_friction",
@@ -48,7 +48,7 @@ DESIGN_EFFECTS = {
 
 def test_effect_names_follow_design():
     for fam, names in EFFECTS.items():
-        assert names == DESIGN_EFFECTS[fam]
+        assert names == CONTRACT_EFFECTS[fam]
 
 
 def test_benjamini_hochberg_worked_example():
@@ -172,7 +172,7 @@ def test_drive_effect_free_twin_gives_no_effect(tmp_path, capsys):
     assert 0 < rep["gap"]["noise_floor_white"] < rep["gap"]["validation"] < 0.015
     assert rep["gap"]["noise_floor"] == pytest.approx(rep["gap"]["validation"], rel=0.3)
     for c in rep["candidates"]:
-        assert c["effect"] in DESIGN_EFFECTS["drive"]
+        assert c["effect"] in CONTRACT_EFFECTS["drive"]
         assert set(c) >= {
             "effect",
             "validation_gap",

@@ -1,5 +1,5 @@
 """The diagnosis on machines it has never seen: physical admissibility of every effect,
-selection by held-out evidence, the simulated null, and the refusals (DESIGN.md §3.2).
+selection by held-out evidence, the simulated null, and the refusals (docs/guides/contracts.md).
 
 Oracles: the physics rules stated in each effect (hand-built parameter values on both
 sides of each rule), the twins' own settings (encoder step, force noise, controller),

@@ -1,4 +1,4 @@
-"""Diagnosis of the `thermal` family on the spindle thermal twin (DESIGN.md §3.2).
+"""Diagnosis of the `thermal` family on the spindle thermal twin (docs/guides/contracts.md).
 
 The twin's nominal plant is exactly the study's static regression (plus 0.1 K sensor noise),
 and each of its effects is built as physics (a heat capacity, a drifting air temperature,

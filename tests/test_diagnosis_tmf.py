@@ -1,4 +1,4 @@
-"""Diagnosis of the `tmf` family on the machine-structure twin (DESIGN.md §3.2).
+"""Diagnosis of the `tmf` family on the machine-structure twin (docs/guides/contracts.md).
 
 The twin's nominal encoder-to-TCP motion is one position-independent TMF of order (2, 4);
 its effects are built as structure (a tool oscillator, a delayed reference sensor, a

@@ -278,3 +278,23 @@ def test_bad_input_is_refused_with_the_fix():
         discover(object())
     with pytest.raises(ValueError, match="n_null"):
         discover(model, [object()], [object()], n_null=-1)
+
+
+@pytest.mark.slow
+def test_diagnose_runs_discovery_when_the_remainder_stays_above_the_null(tmp_path):
+    """`jaxvs.diagnose` on a record whose effect is in no library (viscous friction fading
+    with time): the named search leaves a remainder above the null, so discovery runs and
+    its result is in `report.json`, `report.md` and the figures; `discover=False` skips it."""
+    import jaxvs
+    from jaxvs.plotting import plot_diagnosis
+
+    record = _plant(lambda t, x, v: 40.0 * np.exp(-t / 6.0) * v)
+    report = jaxvs.diagnose(record, family="drive", n_null=9, n_boot=100)
+    assert report["verdict"]["status"] in ("unexplained", "partly_explained")
+    found = report["discovered"]
+    assert found is not None and found["fired"], found
+    assert found["input"] == "velocity·f(time)"
+    assert json.loads(json.dumps(report.to_json()))["discovered"]["message"] == found["message"]
+    assert "## Discovery" in report.to_markdown()
+    assert "discovered.png" in plot_diagnosis(report, tmp_path)
+    assert report.discovered is not None and report.discovered.fired

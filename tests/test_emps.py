@@ -215,7 +215,7 @@ def test_bad_options_raise():
 
 # ------------------------------------------------------------------ EMPS reproduction
 
-# Description §3.4 (and DESIGN.md §4): the MATLAB Script_IDIM_LS output.
+# Description §3.4 : the MATLAB Script_IDIM_LS output.
 PUBLISHED = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "offset": -3.1648}
 PUBLISHED_STD = {"M": 0.1085, "Fv": 1.1460, "Fc": 0.1012, "offset": 0.0444}
 PUBLISHED_ASYM = {"M": 95.154, "Fv_pos": 166.71, "Fc_pos": 20.144, "Fv_neg": 240.42,

@@ -1,4 +1,4 @@
-"""Property-based fuzzing of the loaders (issue 15): random bytes, truncations, overwritten
+"""Property-based fuzzing of the loaders: random bytes, truncations, overwritten
 bytes and cell edits of valid CSV / NPZ / MAT / HDF5 / UFF files must either load exactly
 what the file holds or raise `ValueError` naming the file -- never a partial result, never
 another exception type.

@@ -1,4 +1,5 @@
-"""Ctrl-C at many moments of `jaxvs diagnose`, `check`, `design` and `demo` (DESIGN.md §6).
+"""Ctrl-C at many moments of `jaxvs diagnose`, `check`, `design` and `demo`
+(docs/guides/refusals.md).
 
 Each interrupt runs the real command in a subprocess and sends SIGINT at one moment: while
 Python and JAX are still being imported, while a file is loaded, in the middle of the

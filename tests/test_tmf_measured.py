@@ -1,4 +1,4 @@
-"""Transmissibilities between measured points (issue 5, item 6): the pyuff accelerance FRFs.
+"""Transmissibilities between measured points: the pyuff accelerance FRFs.
 
 Data (`../shared/data/pyuff_frf`, see its README): accelerances at 0, 1, ..., 1000 Hz (bin
 0 invalid), roving hammer at points 1-3 and the accelerometer at point 1, so by reciprocity

@@ -1,6 +1,6 @@
 """Reading and writing `Record`s: CSV, NPZ, MAT and HDF5, plus the EMPS benchmark files.
 
-Conventions shared by every format (DESIGN.md §3.2):
+Conventions shared by every format (docs/guides/contracts.md):
 
 - one experiment per file, signals as 1-D columns, the time vector (default name `t`) in
   seconds;

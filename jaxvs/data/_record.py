@@ -626,7 +626,7 @@ class Record:
         (`q` in m, `u` in N, `T_chassis` in °C …). A signal in another unit of the same
         quantity is converted (`mm` → `m`); one in a different quantity (`N` where `m` is
         expected) is refused. A signal without a unit is taken to be in `unit` already (the
-        canonical names of DESIGN.md §3.2 imply their units) and is labelled with it.
+        canonical names of docs/guides/contracts.md imply their units) and is labelled with it.
 
         **Arguments:**
 

@@ -1,7 +1,7 @@
 """Calibration/validation splits that respect time: contiguous blocks or whole experiments.
 
 Random sample-wise splits leak information between calibration and validation in dynamic
-models (neighbouring samples are correlated), so jaxvs never offers them (DESIGN.md §3.2).
+models (neighbouring samples are correlated), so jaxvs never offers them (docs/guides/contracts.md).
 """
 
 from __future__ import annotations

@@ -1,13 +1,13 @@
 """Units of measured signals: parse them from headers and files, convert them to SI.
 
-jaxvs computes in SI (DESIGN.md §6: "units written in headers or files are honoured by
+jaxvs computes in SI (docs/guides/refusals.md: "units written in headers or files are honoured by
 conversion, never ignored"). Every loader passes the unit it finds through `to_si`, which
 
 - converts lengths to m, forces to N, times to s, velocities to m/s, torques to N·m,
   pressures to Pa, angles to rad, angular velocities to rad/s, and every other quantity to
   its coherent SI unit;
 - keeps two documented exceptions: temperatures go to °C (the thermal family works in °C,
-  DESIGN.md §3.2; K and °F are converted with their offsets) and motor speeds given in
+  docs/guides/contracts.md; K and °F are converted with their offsets) and motor speeds given in
   rpm stay in rpm (the thermal family's `v_m [rpm]`);
 - refuses a unit it cannot read, naming the column and the fix.
 

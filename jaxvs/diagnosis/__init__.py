@@ -1,5 +1,6 @@
 """Sim-to-real gap diagnosis: where a calibrated model disagrees with the machine, which
-unmodelled effect causes it, and how far the gap shrinks once it is added (DESIGN.md §3.2).
+unmodelled effect causes it, and how far the gap shrinks once it is added
+(docs/guides/contracts.md).
 """
 
 from ._base import (
@@ -21,4 +22,4 @@ from ._report import DiagnosisReport as DiagnosisReport
 EFFECTS: dict[str, tuple[str, ...]] = {
     name: tuple(s.name for s in fam().library()) for name, fam in FAMILIES.items()
 }
-"""The effect names of each family, in library order (DESIGN.md §3.2)."""
+"""The effect names of each family, in library order (docs/guides/contracts.md)."""

@@ -11,7 +11,7 @@
   (`admissible(context)`); an inadmissible fit is reported, never accepted.
 - `AdmissibilityContext`: what the admissibility rules compare against (the record's
   sample time and position resolution, the analysed band, the nominal parameters).
-- `EffectSpec`: the library entry of one effect -- its exact name (DESIGN.md §3.2), the
+- `EffectSpec`: the library entry of one effect -- its exact name (docs/guides/contracts.md), the
   signals it needs, the effect it extends (a Stribeck law contains Coulomb friction), and
   how to draw its starting points from the nominal residual.
 - `GapModel`: the nominal model plus the effects added so far; a pure function of its
@@ -50,7 +50,7 @@ __all__ = [
 class NotIdentifiable(Exception):
     """The record cannot identify the family's nominal model (no excitation, one
     direction only, too short, ...); the diagnosis answers with the reason instead of a
-    verdict (DESIGN.md §3.2: `"verdict": null`, `"not_identifiable": reason`, exit 3)."""
+    verdict (docs/guides/contracts.md: `"verdict": null`, `"not_identifiable": reason`, exit 3)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -296,7 +296,7 @@ class Context:
 class EffectSpec:
     """One entry of a family's library of candidate effects.
 
-    - `name`: the exact effect name of DESIGN.md §3.2.
+    - `name`: the exact effect name of docs/guides/contracts.md.
     - `requires`: signals that must be present in every experiment.
     - `templates`: `Context -> list of effects` at zero (or least-squares) size, one per
         starting shape; the best by calibration residual seeds the recalibration.
@@ -365,7 +365,7 @@ class AbstractFamily(abc.ABC):
 
     @abc.abstractmethod
     def library(self) -> list[EffectSpec]:
-        """The candidate effects of this family, in DESIGN.md's order."""
+        """The candidate effects of this family, in the order of docs/guides/contracts.md."""
 
     @abc.abstractmethod
     def identifiability(self, experiments: Sequence[Experiment], model: GapModel) -> str | None:

@@ -1,4 +1,4 @@
-"""`jaxvs.diagnose`: the Python face of `jaxvs diagnose` (DESIGN.md §3.2–3.3)."""
+"""`jaxvs.diagnose`: the Python face of `jaxvs diagnose` (docs/guides/contracts.md)."""
 
 from __future__ import annotations
 
@@ -176,6 +176,7 @@ def diagnose(
     seed: int = 0,
     progress: bool = False,
     signals: Mapping[str, str] | None = None,
+    discover: bool = True,
     **options: Any,
 ) -> DiagnosisReport:
     """Diagnose the sim-to-real gap of a family's nominal model on measured experiments.
@@ -196,8 +197,9 @@ def diagnose(
     **Arguments:**
 
     - `calibration`: one or several experiments: `jaxvs.data.Record`s or paths to CSV,
-        NPZ, MAT or HDF5 files with the canonical signal names of the family (DESIGN.md
-        §3.2), or the EMPS `.mat` files as they are. Several are calibrated jointly.
+        NPZ, MAT or HDF5 files with the canonical signal names of the family
+        (docs/guides/contracts.md), or the EMPS `.mat` files as they are. Several are
+        calibrated jointly.
     - `validation`: optional held-out experiments. Without them, the last `holdout` share
         of the experiments (whole experiments) is held out when there are several, or the
         last contiguous `holdout` block of a single experiment — never random samples.
@@ -215,6 +217,10 @@ def diagnose(
     - `progress`: print progress to stderr.
     - `signals`: the user's own column names mapped onto the canonical ones,
         `{"q": "Position", "u": "Torque", "t": "Time"}` (`jaxvs.data.rename_signals`).
+    - `discover`: after the named search, when the remainder stays above the null
+        (`unexplained` or `partly_explained`), look for an effect outside the library
+        ([`discover`][jaxvs.diagnosis.discover]: a flexible term in the family's slot,
+        then its formula); the result is `report["discovered"]` (default `True`).
     - `**options`: family options (drive: `cutoff_hz`, `decimation`,
       `friction_sharpness`, `zoh_force`, `mass` (the moving mass used when the record does
       not excite the inertia); tmf: `order`; thermal: see the family).
@@ -269,7 +275,7 @@ def diagnose(
             how = f"last {holdout:.0%} of the record held out as a contiguous block"
     else:
         how = "validation experiments given"
-    # `jaxvs check` first (DESIGN.md §3.5), on exactly the calibration experiments (the
+    # `jaxvs check` first (docs/guides/check.md), on exactly the calibration experiments (the
     # search then reuses the compiled nominal fit): blocking findings end the run without
     # a verdict, the others travel with the report as warnings
     from ._check import check_records
@@ -453,8 +459,9 @@ def diagnose(
         "timing": {"seconds": time.perf_counter() - t_start},
     }
     content["verdict"]["status_line"] = status_line(content["verdict"])
+    content["discovered"] = None
     say("done: " + content["verdict"]["status_line"])
-    return DiagnosisReport(
+    report = DiagnosisReport(
         content,
         nominal_model=res.nominal,
         final_model=res.final,
@@ -466,3 +473,26 @@ def diagnose(
         },
         cells=cells,
     )
+    if discover and state["status"] in ("unexplained", "partly_explained"):
+        _discover_into(report, fam, n_null=n_null, seed=seed, say=say)
+    return report
+
+
+def _discover_into(
+    report: DiagnosisReport, fam: AbstractFamily, *, n_null: int, seed: int, say: Any
+) -> None:
+    """Discovery after the named search (`report["discovered"]`, `report.discovered`):
+    only for a remainder above the null, and only where the family has a slot."""
+    from ._discover import SLOT_FAMILIES, discover
+
+    if fam.name not in SLOT_FAMILIES:
+        report.content["discovered"] = {
+            "fired": False,
+            "found": False,
+            "message": f"not run: the {fam.name} family has no discovery slot yet",
+        }
+        return
+    say("discovery: a flexible term in the family's slot, then its formula")
+    found = discover(report, family=fam, n_null=n_null, seed=seed, progress=say)
+    report.discovered = found
+    report.content["discovered"] = found.to_json()

@@ -76,7 +76,10 @@ from ._stats import (
     nrmse,
 )
 
-__all__ = ["Discovered", "discover"]
+__all__ = ["SLOT_FAMILIES", "Discovered", "discover"]
+
+# the families with a discovery slot (the others report that discovery was not run)
+SLOT_FAMILIES = ("drive",)
 
 SLOT_FORCE = "additional force on the axis"
 
@@ -499,7 +502,7 @@ def discover(
                 "formula are scored on data they were not fitted to)."
             )
     fam = FAMILIES[family]() if isinstance(family, str) else family
-    if fam.name != "drive":
+    if fam.name not in SLOT_FAMILIES:
         raise ValueError(
             f"discover: the {fam.name!r} family has no discovery slot yet; the drive family "
             "has the slot 'additional force on the axis'."

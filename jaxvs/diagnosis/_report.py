@@ -1,4 +1,4 @@
-"""The gap report: the content of `report.json` (DESIGN.md §3.2), `report.md` and the
+"""The gap report: the content of `report.json` (docs/guides/contracts.md), `report.md` and the
 self-contained `report.html`."""
 
 from __future__ import annotations
@@ -52,6 +52,7 @@ class DiagnosisReport:
     validation: list[Experiment] = dataclasses.field(default_factory=list)
     predictions: dict[str, list[np.ndarray]] = dataclasses.field(default_factory=dict)
     cells: list[GapCell] = dataclasses.field(default_factory=list)
+    discovered: Any = None
 
     # convenient access
     def __getitem__(self, key: str) -> Any:
@@ -101,7 +102,7 @@ class DiagnosisReport:
         return "\n".join(lines)
 
     def to_json(self) -> dict[str, Any]:
-        """The report as a JSON-ready dictionary (the schema of DESIGN.md §3.2)."""
+        """The report as a JSON-ready dictionary (the schema of docs/guides/contracts.md)."""
         return json_safe(self.content)
 
     def to_markdown(self) -> str:
@@ -165,6 +166,7 @@ class DiagnosisReport:
             )
         lines += _remainder_markdown(v)
         lines += _distortion_markdown(c.get("distortion"))
+        lines += _discovered_markdown(c.get("discovered"))
         lines += [
             "",
             "## Gap (metric: normalised RMS error of the target)",
@@ -386,4 +388,19 @@ def _pruning_markdown(pruning: list[dict[str, Any]]) -> list[str]:
             f"{100 * p['gap_with']:.2f} % | {100 * p['reduction']:.3f} % "
             f"[{100 * lo:.3f}, {100 * hi:.3f}] | {_num(p['delta_bic'], '.1f')} | {kept} |"
         )
+    return lines
+
+
+def _discovered_markdown(d: dict[str, Any] | None) -> list[str]:
+    """The discovery section: what the flexible term and the formula found, in words."""
+    if not d:
+        return []
+    lines = ["", "## Discovery (an effect outside the library)", "", str(d.get("message", ""))]
+    if d.get("fired") and d.get("formula"):
+        lines += ["", f"Formula: `{d['formula']}`" + (" (accepted)" if d.get("found") else "")]
+        if d.get("shrink") is not None:
+            lines.append(
+                f"Held-out shrink {d['shrink']:.2f}; share of what the flexible term removes "
+                f"{d.get('share') or 0:.2f}; nearest named effect: {d.get('nearest_effect')}."
+            )
     return lines

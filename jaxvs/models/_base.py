@@ -37,8 +37,9 @@ PARAMETER_FIX = (
 
 
 def check_parameters(module: eqx.Module) -> None:
-    """Refuse NaN/inf in the concrete array fields of a model or model part (DESIGN.md §6):
-    a `ValueError` naming the class, the field and the first bad index. Traced fields
+    """Refuse NaN/inf in the concrete array fields of a model or model part
+    (docs/guides/refusals.md): a `ValueError` naming the class, the field and the first bad
+    index. Traced fields
     (a model built inside `jit`/`vmap`) are left to the run-time checks of `simulate`."""
     for field in dataclasses.fields(module):
         if field.metadata.get("static", False):

@@ -216,7 +216,8 @@ def plot_bla(bla, fs: float = 1.0, ax=None):
 
 
 def plot_diagnosis(report, out) -> list[str]:
-    """Write the five figures of a diagnosis report as PNG files into `out`.
+    """Write the figures of a diagnosis report (five, and the discovered term's shape
+    when discovery fired) as PNG files into `out`.
 
     **Arguments:**
 
@@ -239,4 +240,12 @@ def plot_diagnosis(report, out) -> list[str]:
         fig.savefig(out / fname, dpi=110, bbox_inches="tight")
         plt.close(fig)
         names.append(fname)
+    found = getattr(report, "discovered", None)
+    if found is not None and getattr(found, "shape", None):
+        from ._discover import plot_discovered
+
+        fig = plot_discovered(found).figure
+        fig.savefig(out / "discovered.png", dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        names.append("discovered.png")
     return names

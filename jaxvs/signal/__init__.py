@@ -8,18 +8,18 @@ from ._basis import (
     quantile_knots as quantile_knots,
     rbf_basis as rbf_basis,
 )
-from ._bootstrap import (
-    block_bootstrap_indices as block_bootstrap_indices,
-    block_bootstrap_means as block_bootstrap_means,
-    block_length as block_length,
-    integrated_time as integrated_time,
-)
 from ._bla import (
     BLA as BLA,
     best_linear_approximation as best_linear_approximation,
     find_period as find_period,
     period_noise as period_noise,
     settled_periods as settled_periods,
+)
+from ._bootstrap import (
+    block_bootstrap_indices as block_bootstrap_indices,
+    block_bootstrap_means as block_bootstrap_means,
+    block_length as block_length,
+    integrated_time as integrated_time,
 )
 from ._cwt import (
     CWTDamping as CWTDamping,

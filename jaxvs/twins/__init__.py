@@ -1,4 +1,4 @@
-"""Richer "real" plants that generate data with known, hidden effects (DESIGN.md §2).
+"""Richer "real" plants that generate data with known, hidden effects (docs/guides/architecture.md).
 
 Only tests, benchmarks, notebooks and the CLI demo import this package.
 """

@@ -1,7 +1,7 @@
 """Drive twin: an EMPS-like closed-loop prismatic axis with switchable hidden effects.
 
 The plant is the Electro-Mechanical Positioning System of Janot, Gautier and Brunot
-(2019, "Data set and reference models of EMPS", DESIGN.md §4): a motor-side mass `Mm`
+(2019, "Data set and reference models of EMPS", docs/guides/drive.md): a motor-side mass `Mm`
 and a load mass `ML` (rigidly connected unless a coupling effect is switched on), viscous
 friction `Fv`, a constant offset force, and the EMPS position controller running at the
 sample rate
@@ -74,7 +74,7 @@ DRIVE_EFFECT_LABELS: tuple[str, ...] = (
     "external_force",
     "position_dependence",
 )
-"""The drive-family effect labels of DESIGN.md §3.2 that `draw_drive_effect` knows."""
+"""The drive-family effect labels of docs/guides/contracts.md that `draw_drive_effect` knows."""
 
 _REQUIRED = object()
 
@@ -884,7 +884,7 @@ def _run(twin: DriveTwin, key, r, dt: float, noise_u, noise_q, open_loop=None):
 def draw_drive_effect(
     key: PRNGKeyArray, effect_label: str, magnitude: str | float = "random"
 ) -> dict[str, dict[str, float]]:
-    """A random, realistic hidden effect for `DriveTwin(effects=...)` from a DESIGN.md
+    """A random, realistic hidden effect for `DriveTwin(effects=...)` from a drive
     effect label.
 
     Sizes are clearly noticeable but not absurd for the EMPS-like axis (rms motor force

@@ -35,7 +35,8 @@ from ..models import OscillatorChain, RationalTF, StateSpace, simulate
 
 DRIVE, ENCODER, COLUMN, TCP = 0, 1, 2, 3
 
-#: Names of the hidden effects of [`MachineStructureTwin`][] (DESIGN.md §3.2, family `tmf`).
+#: Names of the hidden effects of [`MachineStructureTwin`][] (docs/guides/contracts.md,
+#: family `tmf`).
 TMF_TWIN_EFFECTS: tuple[str, ...] = (
     "position_dependence",
     "missing_mode",
@@ -539,7 +540,7 @@ class MachineStructureTwin(eqx.Module):
         # Structure and sensor chain are simulated as one series system per channel, exact
         # for the held force: filtering the *sampled* acceleration as a held signal would
         # delay its smooth part by half a step but not the driving-point feedthrough, an
-        # error of ~15 % in the TMF at the anti-resonances of H_EE (issue 5, route b).
+        # error of ~15 % in the TMF at the anti-resonances of H_EE (route b).
         ss = fam.state_space(at, (ENCODER, self.tcp), quantity="acceleration")
         full = (n_p, n_hits, 2)  # one SISO system per position, hit and channel
         A, B, C, D = (np.asarray(m) for m in (ss.A, ss.B, ss.C, ss.D))
@@ -585,7 +586,7 @@ class MachineStructureTwin(eqx.Module):
         command: ArrayLike | None = None,
         return_truth: bool = False,
     ) -> list[Record] | tuple[list[Record], dict[str, np.ndarray]]:
-        """Diagnosis data of the `tmf` family: one record per Y position (DESIGN.md §3.2).
+        """Diagnosis data of the `tmf` family: one record per Y position (docs/guides/contracts.md).
 
         Drive-side excitation: a pre-emphasised random binary sequence `b` (PRBS-like,
         ±1) in the commanded position, `x_cmd = A (b[k] + emphasis (b[k] − b[k−1]))`, held

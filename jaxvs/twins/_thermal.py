@@ -33,7 +33,7 @@ temperatures are constant apart from sensor noise. Its balance is then algebraic
 i.e. exactly the study's static linear regression on `(T_chassis, v_m)` (eq. 2-3), up to
 the 0.1 K sensor noise.
 
-**Effects** (names as DESIGN.md §3.2; magnitudes in physical units):
+**Effects** (names as docs/guides/contracts.md; magnitudes in physical units):
 
 - `dynamics`, magnitude `τ` [s] (realistic 120-1800): the inner ring / shaft node gets
   a heat capacity `C_b = τ (G_bc + G_bw + G_ba)`, so the target lags its static value

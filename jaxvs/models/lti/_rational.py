@@ -25,7 +25,7 @@ class RationalTF(AbstractLinearModel):
     """Continuous-time SISO rational transfer function.
 
     `G(s) = (b_0 s^m + ... + b_m) / (a_0 s^n + ... + a_n)`, coefficients highest power
-    first as in `scipy.signal` (DESIGN.md §3.3). Proper: `m <= n`. A transmissibility
+    first as in `scipy.signal` (docs/guides/contracts.md). Proper: `m <= n`. A transmissibility
     function (TMF, study eq. 8) has `m == n`.
 
     **Arguments:**

@@ -62,11 +62,11 @@ EMPS = BenchmarkTask(
 """The official EMPS task (train `DATA_EMPS.mat`, test `DATA_EMPS_PULSES.mat`, input
 `u` [N], output `q` [m], 20-sample initialisation window, RMSE shown in mm)."""
 
-# Description §3.4 (MATLAB Script_IDIM_LS output) and DESIGN.md §4.
+# Description §3.4 (MATLAB Script_IDIM_LS output).
 EMPS_PUBLISHED_IDIM = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "offset": -3.1648}
 """Published IDIM-LS estimates: mass [kg], viscous [N·s/m], Coulomb [N], offset [N]."""
 
-_IDENTIBENCH = "identibench / tsfast benchmark tables, as quoted in jaxvs issue 18"
+_IDENTIBENCH = "identibench / tsfast benchmark tables, as published"
 EMPS_PUBLISHED = (
     PublishedResult("GRU", (54.6, 54.6), (107.0, 198.0), _IDENTIBENCH),
     PublishedResult("LSTM", (82.0, 89.0), (107.0, 198.0), _IDENTIBENCH),

@@ -1,5 +1,5 @@
 """The virtual-sensor design assistant: `jaxvs.design` searches inputs, delays and model
-structures in one vectorised run and suggests the best designs (DESIGN.md §3.4)."""
+structures in one vectorised run and suggests the best designs (docs/guides/design.md)."""
 
 from ._data import DesignDataWarning as DesignDataWarning
 from ._design import design as design

@@ -1,4 +1,4 @@
-"""`jaxvs.design`: the virtual-sensor design assistant (DESIGN.md §3.4).
+"""`jaxvs.design`: the virtual-sensor design assistant (docs/guides/design.md).
 
 The thermal study's vision (Dementjev et al. 2014, §5): the design of a virtual sensor --
 inputs, delays, model type -- is manual expert work, and an assistance system should
@@ -172,7 +172,7 @@ def design(
     signals: Mapping[str, str] | None = None,
 ) -> DesignReport:
     """Search inputs, delays and model structures for a virtual sensor of `target`, and
-    rank the designs on held-out data (DESIGN.md §3.4).
+    rank the designs on held-out data (docs/guides/design.md).
 
     **Arguments:**
 

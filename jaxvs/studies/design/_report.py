@@ -1,4 +1,4 @@
-"""The design report: the content of `report.json` (DESIGN.md §3.4), `report.md`,
+"""The design report: the content of `report.json` (docs/guides/design.md), `report.md`,
 a self-contained `report.html`, the figures and `best.eqx`, written atomically."""
 
 from __future__ import annotations
