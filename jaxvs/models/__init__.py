@@ -62,6 +62,7 @@ from .drive import (
     circle_path as circle_path,
     dead_zone as dead_zone,
     legendre as legendre,
+    plan_predict as plan_predict,
     quantise as quantise,
     saturation as saturation,
     smooth_sign as smooth_sign,

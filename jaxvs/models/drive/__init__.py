@@ -57,4 +57,5 @@ from ._volumetric_tests import (
     DiagonalLine as DiagonalLine,
     LaserLine as LaserLine,
     StraightnessLine as StraightnessLine,
+    plan_predict as plan_predict,
 )

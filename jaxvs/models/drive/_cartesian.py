@@ -202,6 +202,12 @@ class CartesianMachine(AbstractModel):
             P = P + jnp.cross(eps, P) + q[..., j, None] * dirs[j] + delta
         return P
 
+    def tool_orientation(self, q: Float[ArrayLike, "... 3"]) -> Float[Array, "... 3"]:
+        """Small rotation `(…, 3)` [rad] of the tool relative to the workpiece at commanded
+        positions `q`: the sum of the axes' angular errors (first order)."""
+        q = jnp.asarray(q)
+        return sum(self.errors.axis_motion(q[..., j], j)[1] for j in range(3))
+
     def volumetric_error(
         self, x: ArrayLike, y: ArrayLike, z: ArrayLike
     ) -> Float[Array, "... 3"]:

@@ -43,6 +43,7 @@ __all__ = [
     "DiagonalLine",
     "LaserLine",
     "StraightnessLine",
+    "plan_predict",
 ]
 
 _AXIS = {"x": 0, "y": 1, "z": 2, 0: 0, 1: 1, 2: 2}
@@ -92,18 +93,28 @@ def _inside(q: np.ndarray, machine: CartesianMachine, where: str) -> None:
 
 class AbstractMachineTest(eqx.Module):
     """A geometric test of a [`CartesianMachine`][]: noise-free readings `predict`, noisy
-    readings `measure`, the reading noise `sigma`."""
+    readings `measure`, the reading noise `sigma`.
+
+    A test is the commanded points it visits (`points`) and what its instrument makes of
+    the tool's actual position and orientation there (`readings`); a whole plan then
+    evaluates the kinematic chain once for all its points ([`plan_predict`][])."""
 
     sigma: eqx.AbstractVar[float]
     runs: eqx.AbstractVar[int]
+    tool_offset: eqx.AbstractVar[Array | None]
 
     @abc.abstractmethod
-    def commanded(self, machine: CartesianMachine) -> np.ndarray:
-        """`(..., 3)` commanded axis positions [m] of the test (NumPy, static geometry)."""
+    def points(self, machine: CartesianMachine) -> tuple[Array, Array]:
+        """`(q (k, 3) [m], direction (k, 3))`: commanded points and approach directions."""
 
     @abc.abstractmethod
+    def readings(self, q: Array, P: Array, R: Array) -> Array:
+        """Readings from the commanded points `q (k, 3)` [m], the tool points `P (k, 3)`
+        [m] and the tool orientations `R (k, 3)` [rad] there."""
+
     def predict(self, machine: CartesianMachine) -> Array:
         """Noise-free readings [m or rad] of the test on `machine`."""
+        return plan_predict(machine, [self])[0]
 
     @property
     def label(self) -> str:
@@ -111,13 +122,35 @@ class AbstractMachineTest(eqx.Module):
 
     def check(self, machine: CartesianMachine) -> None:
         """Refuse a test that leaves the machine's travel (`ValueError`)."""
-        _inside(np.asarray(self.commanded(machine)), machine, self.label)
+        _inside(np.asarray(self.points(machine)[0]), machine, self.label)
 
     def measure(self, machine: CartesianMachine, key: PRNGKeyArray) -> Array:
         """`(runs, *readings)` readings with white noise of standard deviation `sigma`."""
         self.check(machine)
         y = self.predict(machine)
         return y + self.sigma * jax.random.normal(key, (self.runs, *y.shape), y.dtype)
+
+
+def plan_predict(machine: CartesianMachine, tests) -> list[Array]:
+    """Noise-free readings of every test of a plan, with one evaluation of the kinematic
+    chain over all the plan's points (the compiled graph grows with the number of tests
+    only by their cheap read-outs)."""
+    qs, ds, ts, sizes = [], [], [], []
+    for t in tests:
+        q, d = t.points(machine)
+        qs.append(q)
+        ds.append(d)
+        off = machine.tool_offset if t.tool_offset is None else t.tool_offset
+        ts.append(jnp.broadcast_to(off, q.shape))
+        sizes.append(q.shape[0])
+    q, d, off = (jnp.concatenate(v) for v in (qs, ds, ts))
+    P = machine.tool_point(q, d, tool_offset=off)
+    R = machine.tool_orientation(q)
+    out, i = [], 0
+    for t, k in zip(tests, sizes):
+        out.append(t.readings(q[i : i + k], P[i : i + k], R[i : i + k]))
+        i += k
+    return out
 
 
 def _line_targets(machine, axis: int, position, n: int) -> Array:
@@ -168,19 +201,17 @@ class LaserLine(AbstractMachineTest):
     def label(self) -> str:
         return f"laser {'XYZ'[self.axis]} at {np.round(np.asarray(self.position), 3).tolist()}"
 
-    def commanded(self, machine):
-        return np.asarray(_line_targets(machine, self.axis, self.position, self.n))
-
-    def predict(self, machine):
+    def points(self, machine):
         q = _line_targets(machine, self.axis, self.position, self.n)
-        e = jnp.zeros(3, q.dtype).at[self.axis].set(1.0)
-        dirs = [1.0, -1.0] if self.bidirectional else [1.0]
-        P0 = machine.tool_point(q[0], e, tool_offset=self.tool_offset)
-        out = []
-        for d in dirs:
-            P = machine.tool_point(q, d * e, tool_offset=self.tool_offset)
-            out.append((P - P0)[:, self.axis] - (q[:, self.axis] - q[0, self.axis]))
-        return jnp.stack(out)
+        e = jnp.zeros((self.n, 3), q.dtype).at[:, self.axis].set(1.0)
+        if not self.bidirectional:
+            return q, e
+        return jnp.concatenate([q, q]), jnp.concatenate([e, -e])
+
+    def readings(self, q, P, R):
+        k = 2 if self.bidirectional else 1
+        e = (P - q)[:, self.axis].reshape(k, self.n)
+        return e - e[0, 0]
 
 
 class StraightnessLine(AbstractMachineTest):
@@ -229,17 +260,17 @@ class StraightnessLine(AbstractMachineTest):
             f"{np.round(np.asarray(self.position), 3).tolist()}"
         )
 
-    def commanded(self, machine):
-        return np.asarray(_line_targets(machine, self.axis, self.position, self.n))
-
-    def predict(self, machine):
+    def points(self, machine):
         q = _line_targets(machine, self.axis, self.position, self.n)
-        P = machine.tool_point(q, tool_offset=self.tool_offset)[:, self.across]
-        s = q[:, self.axis]
-        A = jnp.stack([jnp.ones_like(s), s - jnp.mean(s)], axis=1)
-        # remove the least-squares line: projection onto the orthogonal complement of A
-        Q, _ = jnp.linalg.qr(A)
-        return P - Q @ (Q.T @ P)
+        return q, jnp.zeros_like(q)
+
+    def readings(self, q, P, R):
+        # remove the least-squares line over the equally spaced targets: project onto the
+        # orthogonal complement of span{1, s} (a fixed matrix, the targets are static)
+        s = np.linspace(-1.0, 1.0, self.n)
+        A = np.stack([np.ones(self.n), s], axis=1)
+        proj = np.eye(self.n) - A @ np.linalg.pinv(A)
+        return jnp.asarray(proj, P.dtype) @ (P - q)[:, self.across]
 
 
 class AngularLine(AbstractMachineTest):
@@ -258,6 +289,7 @@ class AngularLine(AbstractMachineTest):
     """
 
     position: Float[Array, "3"]
+    tool_offset: None
     axis: int = eqx.field(static=True)
     about: int = eqx.field(static=True)
     n: int = eqx.field(static=True)
@@ -278,6 +310,7 @@ class AngularLine(AbstractMachineTest):
                 "tool offset (StraightnessLine('z', 'x', tool_offset=(0, 0.1, 0)))."
             )
         self.position = _vector(position, w, "position")
+        self.tool_offset = None
         self.n = _count(n, w, "n", 3)
         self.sigma = _positive(sigma, w, "sigma")
         self.runs = _count(runs, w, "runs", 1)
@@ -286,13 +319,12 @@ class AngularLine(AbstractMachineTest):
     def label(self) -> str:
         return f"angular {'XYZ'[self.axis]} about {'XYZ'[self.about]}"
 
-    def commanded(self, machine):
-        return np.asarray(_line_targets(machine, self.axis, self.position, self.n))
-
-    def predict(self, machine):
+    def points(self, machine):
         q = _line_targets(machine, self.axis, self.position, self.n)
-        rot = sum(machine.errors.axis_motion(q[:, j], j)[1] for j in range(3))
-        a = rot[:, self.about]
+        return q, jnp.zeros_like(q)
+
+    def readings(self, q, P, R):
+        a = R[:, self.about]
         return a - a[0]
 
 
@@ -354,24 +386,20 @@ class BallbarCircle(AbstractMachineTest):
         """`(n,)` commanded angles [rad]."""
         return 2 * np.pi * np.arange(self.n) / self.n
 
-    def _path(self, dtype):
+    def points(self, machine):
         iu, iv = _PLANES[self.plane]
-        th = jnp.asarray(self.theta, dtype)
         sgn = -1.0 if self.clockwise else 1.0
-        c, s = jnp.cos(th), sgn * jnp.sin(th)
-        q = jnp.broadcast_to(self.centre, (self.n, 3))
-        q = q.at[:, iu].add(self.radius * c).at[:, iv].add(self.radius * s)
-        d = jnp.zeros((self.n, 3), dtype).at[:, iu].set(jnp.sign(-s)).at[:, iv].set(jnp.sign(c))
-        return q, d
+        c, s = np.cos(self.theta), sgn * np.sin(self.theta)
+        off = np.zeros((self.n, 3))
+        off[:, iu], off[:, iv] = self.radius * c, self.radius * s
+        d = np.zeros((self.n, 3))
+        d[:, iu], d[:, iv] = np.sign(np.round(-s, 12)), np.sign(np.round(c, 12))
+        q = self.centre + jnp.asarray(off, self.centre.dtype)
+        q = jnp.concatenate([q, self.centre[None]])
+        return q, jnp.asarray(np.concatenate([d, np.zeros((1, 3))]), q.dtype)
 
-    def commanded(self, machine):
-        return np.asarray(self._path(self.centre.dtype)[0])
-
-    def predict(self, machine):
-        q, d = self._path(self.centre.dtype)
-        P = machine.tool_point(q, d, tool_offset=self.tool_offset)
-        C = machine.tool_point(self.centre, tool_offset=self.tool_offset)
-        r = jnp.sqrt(jnp.sum((P - C) ** 2, axis=-1)) - self.radius
+    def readings(self, q, P, R):
+        r = jnp.sqrt(jnp.sum((P[:-1] - P[-1]) ** 2, axis=-1)) - self.radius
         return r - jnp.mean(r)
 
 
@@ -423,26 +451,25 @@ class DiagonalLine(AbstractMachineTest):
     def label(self) -> str:
         return "diagonal " + "".join("+" if v > 0 else "-" for v in self.signs)
 
-    def _line(self, machine, dtype):
+    def _line(self, machine):
         span = np.asarray(machine.travel)
         c = span.mean(axis=1)
         h = (0.5 - self.margin) * (span[:, 1] - span[:, 0]) * np.asarray(self.signs)
         s = np.linspace(-1.0, 1.0, self.n)[:, None]
-        q = jnp.asarray(c + s * h, dtype)
-        return q, jnp.asarray(h / np.linalg.norm(h), dtype), jnp.asarray(np.sign(h), dtype)
+        return c + s * h, h / np.linalg.norm(h), np.sign(h)
 
-    def commanded(self, machine):
-        return np.asarray(self._line(machine, float)[0])
-
-    def predict(self, machine):
+    def points(self, machine):
+        q, _, sg = self._line(machine)
+        d = np.broadcast_to(sg, q.shape)
+        if self.bidirectional:
+            q, d = np.concatenate([q, q]), np.concatenate([d, -d])
         dtype = machine.tool_offset.dtype
-        q, d, sg = self._line(machine, dtype)
-        dirs = [1.0, -1.0] if self.bidirectional else [1.0]
-        P0 = machine.tool_point(q[0], sg, tool_offset=self.tool_offset)
-        L = jnp.sqrt(jnp.sum((q - q[0]) ** 2, axis=-1))
-        return jnp.stack(
-            [
-                (machine.tool_point(q, v * sg, tool_offset=self.tool_offset) - P0) @ d - L
-                for v in dirs
-            ]
-        )
+        return jnp.asarray(q, dtype), jnp.asarray(d, dtype)
+
+    def readings(self, q, P, R):
+        k = 2 if self.bidirectional else 1
+        d = (q[self.n - 1] - q[0]) / jnp.linalg.norm(q[self.n - 1] - q[0])
+        # q_i − q_0 lies along d with positive length: d·(P_i − P_0) − |q_i − q_0| is the
+        # error along the diagonal, d·(E_i − E_0) with E = P − q
+        e = ((P - q) @ d).reshape(k, self.n)
+        return e - e[0, 0]
