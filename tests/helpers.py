@@ -138,6 +138,35 @@ def _drive_axis():
     return ModelCase(m, u, 1e-3, lambda m: (m.mechanics.mass,), [], rtol=1e-4)
 
 
+def _cartesian_machine():
+    from jaxvs.models import (
+        CartesianMachine,
+        DriveAxis,
+        MachineErrors,
+        PositionLoop,
+        RigidAxis,
+        VelocityLoop,
+        ViscousFriction,
+    )
+
+    def drive():
+        return DriveAxis(RigidAxis(10.0, ViscousFriction(50.0)), PositionLoop(40.0),
+                         VelocityLoop(2000.0))
+
+    travel = ((0.0, 0.5), (0.0, 0.4), (0.0, 0.4))
+    errors = MachineErrors(travel, 2, positioning=np.full((3, 2), 2e-6),
+                           squareness=np.array([3e-5, -2e-5, 1e-5]))
+    m = CartesianMachine(drive(), drive(), drive(), errors, tool_offset=(0.0, 0.0, -0.1))
+    s = np.linspace(0.0, 1.0, 60)
+    u = jnp.asarray(np.stack([0.1 + 0.2 * s, 0.1 + 0.2 * s**2, 0.3 - 0.2 * s], axis=1))
+    errs = [
+        (lambda: CartesianMachine(drive(), drive(), drive(), errors, structure="WXZT"),
+         ValueError, "structure must read"),
+        (lambda: MachineErrors(((0, 500), (0, 400), (0, 400))), ValueError, "in mm"),
+    ]
+    return ModelCase(m, u, 1e-3, lambda m: (m.errors.squareness,), errs, rtol=1e-4)
+
+
 # Every concrete jaxvs.models.AbstractModel, as (name, factory) pairs; a new model class is
 # added here and gets the jit / vmap / gradient / recovery / error tests of
 # tests/test_models_registry.py (which fails while a model class is missing).
@@ -156,4 +185,5 @@ MODELS = [
     ("time_delay_network", lambda: _network(jaxvs.models.TimeDelayNetwork)),
     ("virtual_sensor", _virtual_sensor),
     ("drive_axis", _drive_axis),
+    ("cartesian_machine", _cartesian_machine),
 ]

@@ -27,6 +27,12 @@ from ._loaders import (
     save_mat as save_mat,
     save_npz as save_npz,
 )
+from ._machine_tests import (
+    BallbarData as BallbarData,
+    LaserRuns as LaserRuns,
+    load_ballbar_csv as load_ballbar_csv,
+    load_laser_csv as load_laser_csv,
+)
 from ._quality import signal_quality as signal_quality
 from ._record import DEFAULT_TIME_RTOL as DEFAULT_TIME_RTOL, Record as Record
 from ._sinumerik import (
