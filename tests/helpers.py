@@ -188,6 +188,35 @@ def _designed_sensor():
     return ModelCase(m, u, 1.0, lambda m: (m.core.a, m.core.w), errors)
 
 
+def _cartesian_machine():
+    from jaxvs.models import (
+        CartesianMachine,
+        DriveAxis,
+        MachineErrors,
+        PositionLoop,
+        RigidAxis,
+        VelocityLoop,
+        ViscousFriction,
+    )
+
+    def drive():
+        return DriveAxis(RigidAxis(10.0, ViscousFriction(50.0)), PositionLoop(40.0),
+                         VelocityLoop(2000.0))
+
+    travel = ((0.0, 0.5), (0.0, 0.4), (0.0, 0.4))
+    errors = MachineErrors(travel, 2, positioning=np.full((3, 2), 2e-6),
+                           squareness=np.array([3e-5, -2e-5, 1e-5]))
+    m = CartesianMachine(drive(), drive(), drive(), errors, tool_offset=(0.0, 0.0, -0.1))
+    s = np.linspace(0.0, 1.0, 60)
+    u = jnp.asarray(np.stack([0.1 + 0.2 * s, 0.1 + 0.2 * s**2, 0.3 - 0.2 * s], axis=1))
+    errs = [
+        (lambda: CartesianMachine(drive(), drive(), drive(), errors, structure="WXZT"),
+         ValueError, "structure must read"),
+        (lambda: MachineErrors(((0, 500), (0, 400), (0, 400))), ValueError, "in mm"),
+    ]
+    return ModelCase(m, u, 1e-3, lambda m: (m.errors.squareness,), errs, rtol=1e-4)
+
+
 # Every concrete jaxvs.models.AbstractModel, as (name, factory) pairs; a new model class is
 # added here and gets the jit / vmap / gradient / recovery / error tests of
 # tests/test_models_registry.py (which fails while a model class is missing).
@@ -209,4 +238,5 @@ MODELS = [
     ("oscillator_chain", _oscillator_chain),
     ("stable_tmf", _stable_tmf),
     ("designed_sensor", _designed_sensor),
+    ("cartesian_machine", _cartesian_machine),
 ]

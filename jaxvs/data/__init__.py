@@ -27,6 +27,12 @@ from ._loaders import (
     save_mat as save_mat,
     save_npz as save_npz,
 )
+from ._machine_tests import (
+    BallbarData as BallbarData,
+    LaserRuns as LaserRuns,
+    load_ballbar_csv as load_ballbar_csv,
+    load_laser_csv as load_laser_csv,
+)
 from ._mapping import (
     load_renamed as load_renamed,
     rename_signals as rename_signals,

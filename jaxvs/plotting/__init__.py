@@ -13,6 +13,10 @@ from ._drive import (
     loop_bode_plot as loop_bode_plot,
     scalogram_plot as scalogram_plot,
 )
+from ._machine import (
+    machine_errors_plot as machine_errors_plot,
+    volumetric_error_plot as volumetric_error_plot,
+)
 from ._thermal import (
     correlation_plot as correlation_plot,
     prediction_plot as prediction_plot,

@@ -3,6 +3,8 @@
 - `jaxvs.studies.thermal`: thermal virtual sensor (trainlm, sparse resampling, input
   selection, virtual-sensor metrics);
 - `jaxvs.studies.drive`: CNC axis drives (IDIM-LS, closed-loop calibration);
+- `jaxvs.studies.machine`: the three-axis machine's 21 geometric errors (volumetric
+  calibration, identifiability of test plans, test-plan suggestion);
 - `jaxvs.studies.tmf`: TMF virtual sensor (identification routes, position families);
 - `jaxvs.studies.benchmarks`: public identification benchmarks as tasks (EMPS first);
 - `jaxvs.studies.design`: the virtual-sensor design assistant (`jaxvs.design`).
@@ -14,6 +16,7 @@ from . import (
     benchmarks as benchmarks,
     design as design,
     drive as drive,
+    machine as machine,
     thermal as thermal,
     tmf as tmf,
 )
@@ -26,6 +29,14 @@ from .drive import (
     idim_ls as idim_ls,
     idim_regressor as idim_regressor,
     predict_force as predict_force,
+)
+from .machine import (
+    IdentifiabilityReport as IdentifiabilityReport,
+    MachineCalibration as MachineCalibration,
+    calibrate_machine as calibrate_machine,
+    compensated_error as compensated_error,
+    identifiability as identifiability,
+    suggest_test as suggest_test,
 )
 from .thermal import (
     STOP_REASONS as STOP_REASONS,

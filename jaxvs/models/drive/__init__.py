@@ -1,11 +1,17 @@
 """CNC axis-drive components: friction laws, axis mechanics (rigid, two-mass, ball screw),
-cascaded P/PI loops, actuators, the `DriveAxis` cascade, and two-axis contouring."""
+cascaded P/PI loops, actuators, the `DriveAxis` cascade, two-axis contouring, and the
+three-axis Cartesian machine with its 21 geometric errors."""
 
 from ._ballscrew import (
     AbstractMechanics as AbstractMechanics,
     BallScrew as BallScrew,
     FlexibleAxis as FlexibleAxis,
     RigidAxis as RigidAxis,
+)
+from ._cartesian import (
+    STRUCTURES as STRUCTURES,
+    CartesianMachine as CartesianMachine,
+    MachineResponse as MachineResponse,
 )
 from ._contouring import (
     BallbarResult as BallbarResult,
@@ -45,4 +51,18 @@ from ._friction import (
     quantise as quantise,
     saturation as saturation,
     smooth_sign as smooth_sign,
+)
+from ._geometric_errors import (
+    COMPONENTS as COMPONENTS,
+    MachineErrors as MachineErrors,
+    legendre as legendre,
+)
+from ._volumetric_tests import (
+    AbstractMachineTest as AbstractMachineTest,
+    AngularLine as AngularLine,
+    BallbarCircle as BallbarCircle,
+    DiagonalLine as DiagonalLine,
+    LaserLine as LaserLine,
+    StraightnessLine as StraightnessLine,
+    plan_predict as plan_predict,
 )
