@@ -166,7 +166,9 @@ def design_report(tmp_path_factory):
         max_delay=1,
         progress=False,
     )
-    return rep, rep.save(tmp_path_factory.mktemp("design") / "out")
+    from jaxvs.plotting import plot_design
+
+    return rep, rep.save(tmp_path_factory.mktemp("design") / "out", figures=plot_design)
 
 
 def test_design_report_html(design_report):
@@ -207,7 +209,7 @@ def test_design_refuses_data_without_a_varying_input(tmp_path):
 # ------------------------------------------------------------------------- check
 
 
-def drive_record(*, both_ways=True, n=3000, fs=1000.0):
+def drive_record(*, both_ways=True, n=3000, fs=1000.0, clip=150.0):
     rng = np.random.default_rng(0)
     t = np.arange(n) / fs
     q = 0.01 * np.sin(2 * np.pi * 0.7 * t) + 0.004 * np.sin(2 * np.pi * 3.1 * t + 1.0)
@@ -215,7 +217,9 @@ def drive_record(*, both_ways=True, n=3000, fs=1000.0):
         q = 0.2 * t + 0.0005 * np.sin(2 * np.pi * 3.1 * t)
     v = np.gradient(q, 1 / fs)
     u = 95.0 * np.gradient(v, 1 / fs) + 200.0 * v - 3.0 + 0.5 * rng.standard_normal(n)
-    u = np.clip(u, -20.0, 20.0)  # a clipped force: a warning in the report
+    # a clipped force: a warning in the report while a few % of the samples sit at the
+    # limit (9 % at 150 N), blocking when most of them do (one way at 20 N: 86 %)
+    u = np.clip(u, -clip, clip)
     return Record({"q": q, "u": u}, dt=1 / fs, units={"q": "m", "u": "N"})
 
 
@@ -236,20 +240,20 @@ def test_check_report_html(tmp_path):
 def test_diagnose_runs_the_check_first(tmp_path):
     """A drive moving one way only: the check blocks, diagnose writes no verdict, exit 3,
     the check's reason in report.json, report.md and report.html."""
-    rep = jaxvs.diagnose(drive_record(both_ways=False), family="drive")
+    rep = jaxvs.diagnose(drive_record(both_ways=False, clip=20.0), family="drive")
     assert rep.content["verdict"] is None
     assert rep.content["not_identifiable"].startswith("jaxvs check:")
     assert "one direction only" in rep.content["not_identifiable"]
     assert rep.content["check"]["blocking"]
-    path = save_csv(drive_record(both_ways=False), tmp_path / "oneway.csv")
+    path = save_csv(drive_record(both_ways=False, clip=20.0), tmp_path / "oneway.csv")
     out = tmp_path / "d"
     assert main(["diagnose", str(path), "--family", "drive", "--out", str(out), "--quiet"]) == 3
     content = json.loads((out / "report.json").read_text())
     assert content["verdict"] is None and "one direction only" in content["not_identifiable"]
     for name in ("report.md", "report.html"):
         assert "one direction only" in (out / name).read_text()
-    # the clipping warning (non-blocking) travels with the report
-    assert any("minimum or maximum" in w for w in content["warnings"])
+    # the clipped force (86 % at the limit) blocks too, beside the one-way motion
+    assert "minimum or maximum" in content["not_identifiable"]
 
 
 # ------------------------------------------------------------------------- building blocks
