@@ -518,3 +518,27 @@ def test_fit_weights_hold_samples_out():
     np.testing.assert_allclose(a.model.mechanics.friction.Fv, 180.0, rtol=1e-3)
     with pytest.raises(ValueError, match="weights must be"):
         fit_multiple_shooting(start, u, y, segment_length=n - 20, weights=np.zeros(n), **kw)
+
+
+def test_swapped_or_edited_files_are_refused(emps_folder, tmp_path):
+    """The task's files are checked against the published SHA-256: the two files swapped
+    under each other's names are named as swapped (training on the test file would report a
+    figure the test data chose); an edited file is refused as not the published one."""
+    import shutil
+
+    swapped = tmp_path / "swapped"
+    swapped.mkdir()
+    shutil.copy(emps_folder / "DATA_EMPS.mat", swapped / "DATA_EMPS_PULSES.mat")
+    shutil.copy(emps_folder / "DATA_EMPS_PULSES.mat", swapped / "DATA_EMPS.mat")
+    with pytest.raises(ValueError, match=r"holds the benchmark's 'DATA_EMPS_PULSES.mat'.*swapped"):
+        EMPS.load(swapped)
+    edited = tmp_path / "edited"
+    edited.mkdir()
+    shutil.copy(emps_folder / "DATA_EMPS_PULSES.mat", edited / "DATA_EMPS_PULSES.mat")
+    raw = scipy.io.loadmat(emps_folder / "DATA_EMPS.mat")
+    kept = {k: v for k, v in raw.items() if not k.startswith("__")}
+    scipy.io.savemat(edited / "DATA_EMPS.mat", kept)
+    with pytest.raises(ValueError, match="not the benchmark's published 'DATA_EMPS.mat'"):
+        EMPS.load(edited)
+    # the published files load, unchanged
+    assert len(EMPS.load(emps_folder).train[0]) == 24841

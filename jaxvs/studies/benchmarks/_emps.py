@@ -38,8 +38,20 @@ __all__ = [
 EMPS = BenchmarkTask(
     name="EMPS",
     loader=load_emps,
-    train=(Segment("DATA_EMPS.mat", samples=24841),),
-    test=(Segment("DATA_EMPS_PULSES.mat", samples=24841),),
+    train=(
+        Segment(
+            "DATA_EMPS.mat",
+            samples=24841,
+            sha256="6cf6814ae14618795da0101aae2bb97ff0c6351b0501b5492751b02b07facf7e",
+        ),
+    ),
+    test=(
+        Segment(
+            "DATA_EMPS_PULSES.mat",
+            samples=24841,
+            sha256="0eab75bb1f6b16228ee78791343a88bf9bfd9a51036ac9807d7b5fc11c0e1704",
+        ),
+    ),
     inputs=("u",),
     outputs=("q",),
     init_window=20,

@@ -25,6 +25,7 @@ A task admits what the public benchmarks need:
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 import time
@@ -153,6 +154,8 @@ class Segment:
     - `start`, `stop`: sample range (Python slice semantics; `stop=None` = to the end).
     - `samples`: expected number of samples of the segment (checked on load; `None` = no
       check). Catches a truncated download or a different version of the file.
+    - `sha256`: SHA-256 of the published file (checked on load; `None` = no check).
+      Catches an edited file and two files of a task swapped under each other's names.
     """
 
     file: str
@@ -160,6 +163,7 @@ class Segment:
     start: int = 0
     stop: int | None = None
     samples: int | None = None
+    sha256: str | None = None
 
     def __post_init__(self):
         if not isinstance(self.file, str) or not self.file:
@@ -280,6 +284,27 @@ class BenchmarkTask:
                 f"the folder holding {sorted({s.file for s in self.train + self.test})}."
             )
         cache: dict[str, Record] = {}
+        digests = {s.sha256: s.file for s in self.train + self.test if s.sha256}
+
+        def check_digest(seg: Segment, path: Path) -> None:
+            if seg.sha256 is None:
+                return
+            digest = hashlib.sha256(path.read_bytes()).hexdigest()
+            if digest == seg.sha256:
+                return
+            other = digests.get(digest)
+            if other is not None:
+                raise ValueError(
+                    f"{self.name}: {str(path)!r} holds the benchmark's {other!r}, not "
+                    f"{seg.file!r}: the files are swapped (or copied under the other name). "
+                    "Give each file its published name; training on the test file would "
+                    "report a figure the test data chose."
+                )
+            raise ValueError(
+                f"{self.name}: {str(path)!r} is not the benchmark's published {seg.file!r} "
+                "(its content differs: an edited, re-saved or other version of the file). "
+                "Use the benchmark's original files."
+            )
 
         def one(seg: Segment) -> Record:
             path = folder / seg.file
@@ -289,6 +314,7 @@ class BenchmarkTask:
                     f"{sorted({s.file for s in self.train + self.test})}."
                 )
             if seg.file not in cache:
+                check_digest(seg, path)
                 cache[seg.file] = self.loader(path)
             rec = cache[seg.file]
             missing = [n for n in self.inputs + self.outputs if n not in rec]
