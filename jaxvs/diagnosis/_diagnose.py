@@ -22,21 +22,16 @@ from ..data import (
 )
 from ._base import AbstractFamily, NotIdentifiable
 from ._distortion import nonlinear_distortion
-from ._drive import DriveFamily
 from ._engine import search
 from ._gapmap import gap_map
 from ._options import validate_options
 from ._report import DiagnosisReport
 from ._stats import block_length, gap_change_interval, nrmse
-from ._thermal import ThermalFamily
-from ._tmf import TMFFamily
 from ._verdict import decide, status_line
 
 __all__ = ["FAMILIES", "diagnose"]
 
-FAMILIES: dict[str, type[AbstractFamily]] = {"drive": DriveFamily}
-FAMILIES["thermal"] = ThermalFamily
-FAMILIES["tmf"] = TMFFamily
+from ._families import FAMILIES  # noqa: E402
 
 
 def _records(

@@ -470,7 +470,7 @@ def discover(
 
     **Returns:** a [`Discovered`][jaxvs.diagnosis.Discovered].
     """
-    from ._diagnose import FAMILIES
+    from ._families import FAMILIES
 
     t0 = time.perf_counter()
     say = progress or (lambda msg: None)
