@@ -302,11 +302,11 @@ def test_jit_and_errors_under_jit():
 def test_bad_input():
     num, den, *_ = _system(2, 2, seed=4)
     h = _response(num, den)
-    with pytest.raises(ValueError, match="H contains NaN or inf"):
+    with pytest.raises(ValueError, match=r"H has 180 non-finite value\(s\), the first at index \(120,\)"):
         jaxvs.fit_rational(OMEGA, np.where(OMEGA > 100, np.inf, h), (2, 2))
-    with pytest.raises(ValueError, match="omega contains NaN or inf"):
+    with pytest.raises(ValueError, match=r"omega has 180 non-finite value"):
         jaxvs.fit_rational(np.where(OMEGA > 100, np.nan, OMEGA), h, (2, 2))
-    with pytest.raises(ValueError, match="weights contains NaN or inf"):
+    with pytest.raises(ValueError, match=r"weights has \d+ non-finite value"):
         jaxvs.fit_rational(OMEGA, h, (2, 2), weights=np.full(OMEGA.shape, np.nan))
     with pytest.raises(ValueError, match="cannot determine 5 parameters"):
         jaxvs.fit_rational(OMEGA[:4], h[:4], (2, 2))
