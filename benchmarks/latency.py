@@ -143,9 +143,9 @@ def markdown(res: dict) -> str:
         "= the same call again in that process (run only); *warm* = a new process with the "
         "persistent compilation cache (`jaxvs.enable_compilation_cache`) that the cold one "
         f"filled. Machine: {res['machine']['cpus']} CPUs, load average "
-        f"{res['machine']['load_start']:.1f} → {res['machine']['load_end']:.1f} (shared "
-        "machine, beside other jobs: indicative); jax "
-        f"{res['machine']['jax']}. No GPU was available for these figures.",
+        f"{res['machine']['load_start']:.1f} → {res['machine']['load_end']:.1f} "
+        "(above about 1 per core the figures are those of a shared machine, indicative only); jax "
+        f"{res['machine']['jax']}, backend {res['machine'].get('backend', 'cpu')}.",
         "",
         "| entry point | workload | first call, cold [s] | first call, warm [s] | second call "
         "[s] | share of the cold call not spent running | cache files |",
@@ -200,6 +200,7 @@ def main(argv=None) -> None:
                 "load_end": os.getloadavg()[0],
                 "platform": platform.platform(),
                 "jax": jax.__version__,
+                "backend": jax.default_backend(),
             },
         }
         RESULTS.mkdir(parents=True, exist_ok=True)

@@ -17,9 +17,10 @@ calibration from simulated ISO tests, the volumetric error before and after comp
    against a loop of `scipy.integrate.solve_ivp` (RK45, same tolerances) over the same
    three axes on an independent NumPy right-hand side, in the same process.
 
-Default: reduced sizes (Legendre degree 3, 4 s path) for CI; `--full`: degree 4 (69
-coefficients + 3 reversal values), 20 s path. Writes `benchmarks/results/machine_study.json`
-and `.md`. Run: `python benchmarks/machine_study.py [--full]`.
+Default (`make bench`): Legendre degree 4 (69 coefficients + 3 reversal values), 20 s
+path; `--quick`: degree 3 and a 4 s path (about 4 minutes on 2 cores). Writes
+`benchmarks/results/machine_study.json` and `.md`. Run:
+`python benchmarks/machine_study.py [--quick]`.
 """
 
 import argparse
@@ -35,6 +36,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.integrate as si  # noqa: E402
+from scipy.spatial import cKDTree  # noqa: E402
 
 from jaxvs.models import (  # noqa: E402
     CartesianMachine,
@@ -195,12 +197,20 @@ def cone_frustum(feed, dt, r_bottom=0.06, height=0.03, half_angle=np.deg2rad(15)
     return c + np.stack([r * np.cos(s), r * np.sin(s), z], 1)
 
 
-def _contour_error(actual, nominal):
-    err = np.empty(len(actual))
-    for i in range(0, len(actual), 2000):
-        d = np.linalg.norm(actual[i : i + 2000, None, :] - nominal[None, :, :], axis=-1)
-        err[i : i + 2000] = d.min(axis=1)
-    return err
+def _contour_error(actual, path, k=8):
+    """Distance of each actual point to the commanded polyline `path`: the nearest of the
+    segments that touch its `k` nearest vertices (a KD-tree), each by exact projection."""
+    keep = np.r_[True, np.linalg.norm(np.diff(path, axis=0), axis=1) > 0]
+    v = path[keep]
+    _, idx = cKDTree(v).query(actual, k=k)
+    a = v[np.clip(np.concatenate([idx - 1, idx], 1), 0, len(v) - 2)]  # segment starts
+    b = v[np.clip(np.concatenate([idx, idx + 1], 1), 1, len(v) - 1)]  # segment ends
+    ab = b - a
+    s = np.einsum("nkd,nkd->nk", actual[:, None] - a, ab) / np.maximum(
+        np.einsum("nkd,nkd->nk", ab, ab), 1e-300
+    )
+    foot = a + np.clip(s, 0.0, 1.0)[..., None] * ab
+    return np.linalg.norm(actual[:, None] - foot, axis=-1).min(axis=1)
 
 
 def contouring(truth, dt=1e-3) -> list:
@@ -211,13 +221,8 @@ def contouring(truth, dt=1e-3) -> list:
             sim = truth.simulate(jnp.asarray(ref), dt)
             tool = np.asarray(sim.tool)
             nominal = ref + np.asarray(TOOL)
-            dense = np.asarray(
-                jax.vmap(lambda a, b: a + (b - a) * jnp.linspace(0, 1, 5)[:, None], out_axes=0)(
-                    nominal[:-1], nominal[1:]
-                )
-            ).reshape(-1, 3)
             geo = np.asarray(truth.volumetric_error(*np.asarray(ref).T))
-            e = _contour_error(tool, dense)
+            e = _contour_error(tool, nominal)
             rows.append(
                 {
                     "path": name,
@@ -294,8 +299,10 @@ def markdown(res: dict) -> str:
     lines = [
         "# Three-axis machine study",
         "",
-        f"Load average at start {res['load_average'][0]:.1f} (2 cores, run beside other jobs); "
-        f"size: {'full' if res['full'] else 'reduced (CI)'}.",
+        f"Load average at start {res['load_average'][0]:.1f}, at the end "
+        f"{res['load_average_end'][0]:.1f} ({os.cpu_count()} CPU cores, jax backend "
+        f"{jax.default_backend()}, jax {jax.__version__}); "
+        f"size: {'full' if res['full'] else 'reduced (--quick)'}.",
         "",
         "## Calibration of the 21 components",
         "",
@@ -369,10 +376,10 @@ def markdown(res: dict) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--full", action="store_true", help="degree 4 and a 20 s path")
+    ap.add_argument("--quick", action="store_true", help="degree 3 and a 4 s path")
     args = ap.parse_args()
-    degree, duration = (4, 20.0) if args.full else (3, 4.0)
-    res = {"full": args.full, "load_average": os.getloadavg()}
+    degree, duration = (3, 4.0) if args.quick else (4, 20.0)
+    res = {"full": not args.quick, "load_average": os.getloadavg()}
     print("load average", res["load_average"])
     cal, truth, estimate, nominal = calibration_study(degree)
     res["calibration"] = cal

@@ -302,7 +302,8 @@ def test_jit_and_errors_under_jit():
 def test_bad_input():
     num, den, *_ = _system(2, 2, seed=4)
     h = _response(num, den)
-    with pytest.raises(ValueError, match=r"H has 180 non-finite value\(s\), the first at index \(120,\)"):
+    first = r"H has 180 non-finite value\(s\), the first at index \(120,\)"
+    with pytest.raises(ValueError, match=first):
         jaxvs.fit_rational(OMEGA, np.where(OMEGA > 100, np.inf, h), (2, 2))
     with pytest.raises(ValueError, match=r"omega has 180 non-finite value"):
         jaxvs.fit_rational(np.where(OMEGA > 100, np.nan, OMEGA), h, (2, 2))
