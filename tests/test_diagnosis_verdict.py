@@ -206,3 +206,20 @@ def test_repeated_periods_measure_the_noise_and_show_a_nonlinearity():
     rand = fam.prepare(_tmf_record(rng, 1e-5 * rng.standard_normal(3000), 0.0, sigma, dt), "r")
     assert nonlinear_distortion("tmf", [rand])["available"] is False
     assert nonlinear_distortion("thermal", [rand])["available"] is False
+
+
+def test_report_json_carries_its_schema_version(tmp_path):
+    """Every report's `to_json()` is `content` plus `schema_version` (an integer), and
+    `save` writes exactly that."""
+    from jaxvs.diagnosis._check import CHECK_SCHEMA_VERSION, CheckReport
+    from jaxvs.diagnosis._report import SCHEMA_VERSION
+    from jaxvs.studies.design._report import SCHEMA_VERSION as DESIGN_SCHEMA_VERSION
+
+    content = {"family": "drive", "verdict": None, "not_identifiable": "one direction only",
+               "nominal": {"model": "rigid axis"}, "gap": None}  # fmt: skip
+    out = DiagnosisReport(content).to_json()
+    assert out.pop("schema_version") == SCHEMA_VERSION == 2
+    assert out == content
+    check = CheckReport({"family": "drive", "identifiable": False, "records": []})
+    assert check.to_json() == {"schema_version": CHECK_SCHEMA_VERSION, **check.content}
+    assert isinstance(DESIGN_SCHEMA_VERSION, int)

@@ -37,7 +37,11 @@ from ._base import GapModel, NotIdentifiable, unwrap
 from ._diagnose import _CHECK_VALUES, FAMILIES, _check_signals, _memory_check, _records
 from ._options import validate_options
 
-__all__ = ["CheckReport", "check"]
+__all__ = ["CHECK_SCHEMA_VERSION", "CheckReport", "check"]
+
+CHECK_SCHEMA_VERSION = 1
+"""`schema_version` of the check's `report.json` (raised when a key is removed or changes
+meaning)."""
 
 # heuristics, each documented where it is used
 _SINGULAR_RTOL = 1e-6
@@ -50,6 +54,10 @@ class CheckReport:
 
     def __init__(self, content: dict[str, Any]):
         self.content = content
+
+    def to_json(self) -> dict[str, Any]:
+        """`report.json`: the content with its `schema_version`, JSON-ready."""
+        return {"schema_version": CHECK_SCHEMA_VERSION, **json_safe(self.content)}
 
     @property
     def ok(self) -> bool:
@@ -124,7 +132,7 @@ class CheckReport:
         """Write `report.json`, `report.md` and `report.html` to `folder` (created)."""
         out = pathlib.Path(folder)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "report.json").write_text(json.dumps(json_safe(self.content), indent=2) + "\n")
+        (out / "report.json").write_text(json.dumps(self.to_json(), indent=2) + "\n")
         (out / "report.md").write_text(self.to_markdown())
         (out / "report.html").write_text(self.to_html())
         return out

@@ -16,7 +16,12 @@ from ._base import Experiment, GapModel
 from ._gapmap import GapCell
 from ._verdict import status_line
 
-__all__ = ["DiagnosisReport"]
+__all__ = ["SCHEMA_VERSION", "DiagnosisReport"]
+
+SCHEMA_VERSION = 2
+"""`schema_version` of the diagnosis `report.json`: raised when a key is removed or changes
+meaning (2: `verdict.status`, and `verdict.adequate` true only for that state); keys added
+leave it unchanged."""
 
 
 @dataclasses.dataclass
@@ -102,8 +107,9 @@ class DiagnosisReport:
         return "\n".join(lines)
 
     def to_json(self) -> dict[str, Any]:
-        """The report as a JSON-ready dictionary (the schema of docs/guides/contracts.md)."""
-        return json_safe(self.content)
+        """The report as a JSON-ready dictionary (the schema of docs/guides/contracts.md),
+        with its `schema_version`; the one place `report.json` is written from."""
+        return {"schema_version": SCHEMA_VERSION, **json_safe(self.content)}
 
     def to_markdown(self) -> str:
         c = self.content

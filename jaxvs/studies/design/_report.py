@@ -18,7 +18,11 @@ from ..._html import markdown_to_html, report_html
 from ..._io import save_model
 from ..._misc import json_safe
 
-__all__ = ["DesignReport"]
+__all__ = ["SCHEMA_VERSION", "DesignReport"]
+
+SCHEMA_VERSION = 1
+"""`schema_version` of the design `report.json` (raised when a key is removed or changes
+meaning)."""
 
 
 def _fmt(v: Any, nd: int = 4) -> str:
@@ -74,7 +78,8 @@ class DesignReport:
         return self.content["best"]
 
     def to_json(self) -> dict[str, Any]:
-        return json_safe(self.content)
+        """`report.json`: the content with its `schema_version`, JSON-ready."""
+        return {"schema_version": SCHEMA_VERSION, **json_safe(self.content)}
 
     def to_markdown(self) -> str:
         c = self.content
