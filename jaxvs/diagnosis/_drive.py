@@ -70,6 +70,7 @@ from ._base import (
 )
 from ._stats import (
     difference_noise_sigma,
+    noise_like,
     quantisation_step,
     white_noise_floor,
 )
@@ -1114,8 +1115,9 @@ class DriveFamily(AbstractFamily):
         from `r` and the measured `q` to `u`, fitted by least squares, explaining at least
         95 % of the force variance): the closed loop is simulated at the record's sampling
         with that controller, the rigid axis (exact zero-order-hold discretisation), the
-        record's quantisation step (a random encoder zero per draw) and white force noise
-        of the controller fit's residual level (its white part). Otherwise (open loop, or no identifiable
+        record's quantisation step (a random encoder zero per draw) and force noise with
+        the spectrum of what the controller fit leaves of the recorded force
+        (`noise_like`: a coloured force noise keeps its in-band power). Otherwise (open loop, or no identifiable
         controller) the record's own motion, low-pass filtered, is replayed: the force is
         the nominal model's, plus white noise of the record's level, the position
         re-quantised. Each simulated record then goes through the same preprocessing."""
@@ -1331,7 +1333,19 @@ def identify_controller(
     **Returns:** `(coefficients, r2, sigma)`: coefficients in the order
     `a_0..a_{L−1}, b_0..b_{L−1}, c, d`, the share of the force variance explained, and
     the standard deviation of the residual's white part [N] (the force measurement
-    noise when the controller is linear)."""
+    noise when the controller is linear and the noise white)."""
+    coef, r2, res = _controller_fit(q, u, r, dt, taps)
+    # the white part of the residual (robust successive differences): a disturbance the
+    # record carries besides the controller output (force pulses injected into the drive)
+    # is not measurement noise and does not belong in the null
+    return coef, r2, difference_noise_sigma(res)
+
+
+def _controller_fit(
+    q: np.ndarray, u: np.ndarray, r: np.ndarray, dt: float, taps: int
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """`identify_controller`'s least squares: `(coefficients, r2, residual)`; the
+    residual is what the recorded force carries besides the controller's output."""
     n = q.size
     win = np.lib.stride_tricks.sliding_window_view
     rp = np.concatenate([np.full(taps - 1, r[0]), r])
@@ -1346,10 +1360,7 @@ def identify_controller(
     res = u - phi @ coef
     var_u = float(np.var(u))
     r2 = 1.0 - float(np.var(res)) / var_u if var_u > 0 else 0.0
-    # the white part of the residual (robust successive differences): a disturbance the
-    # record carries besides the controller output (force pulses injected into the drive)
-    # is not measurement noise and does not belong in the null
-    return coef, r2, difference_noise_sigma(res)
+    return coef, r2, res
 
 
 def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Record]:
@@ -1369,7 +1380,7 @@ def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Recor
     if "r" in rec.names and mass > 0:  # a fixed zero mass: no loop to simulate, replay
         r = np.asarray(rec["r"], float)
         taps = int(options.get("controller_taps", 16))
-        coef, r2, sigma_u = identify_controller(q, u, r, dt, taps)
+        coef, r2, res_u = _controller_fit(q, u, r, dt, taps)
         if r2 >= 0.95:
             sims = _closed_loop(coef, taps, r, q[0], mass, fv, off, dt, quantise, count)
             track = float(np.sqrt(np.mean((q - r) ** 2))) + 10 * max(step, sigma_q)
@@ -1380,7 +1391,9 @@ def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Recor
                 sims = None  # the identified loop does not track: replay instead
             else:
                 q_sim, u_sim = sims
-                u_sim = u_sim + sigma_u * rng.standard_normal(u_sim.shape)
+                # the recorded force's own noise: what the identified controller leaves
+                # of it, with its spectrum (a coloured noise keeps its in-band power)
+                u_sim = u_sim + noise_like(res_u, fs, rng, count)
                 sims = (q_sim, u_sim)
     if sims is None:
         # replay of the record's in-band motion; the force acting at t_k + dt/2 is what a
