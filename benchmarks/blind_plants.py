@@ -49,6 +49,12 @@ thermal (lumped network; the nominal is the static regression of the study):
 - `speed_nonlinearity`: (A) power-law friction heat `∝ |v|^α`; (B) quadratic friction
   heat with speed-dependent convection.
 
+Sizes: the setting `effect_size` (default 1) scales an effect's magnitude (friction levels,
+backlash gap, external and position forces, tmf pure delay, thermal quadratic heat) with
+every other parameter of the plant unchanged. Each library effect has a case whose
+held-out gap is 3–20 times the noise floor (the hard, small size) and one with a larger
+gap, where the plant can make one (a delay or resonance inside a stable loop stays small).
+
 Effect-free plants (the nominal model of the family is exact) run through the same
 pipeline artefacts: quantised encoders, digital P/PI cascades at their own rate with
 velocity estimation by differencing and filters, force sample-and-hold, white and
@@ -1274,7 +1280,7 @@ DY, AT, CT, SN = "dynamics", "ambient_temperature", "coolant_temperature", "spee
 
 
 def cases() -> list[Case]:
-    """The deterministic list of blind cases (55: 16 effect-free)."""
+    """The deterministic list of blind cases (56: 16 effect-free)."""
     robot = dict(fs_rec=10, fs_ctrl=200, resolution=2e-5, speed=0.05, t_move=4.0)
     robot.update(n_cal=3000, n_val=1500, noise_u=0.3)
     drive = [
