@@ -622,7 +622,8 @@ def main(argv=None) -> int:
         unknown = set(names) - {c.name for c in all_cases}
         if unknown:
             raise SystemExit(f"unknown case(s) {sorted(unknown)}; see blind_plants.py")
-        chosen = [c for c in all_cases if c.name in names]
+        by_name = {c.name: c for c in all_cases}
+        chosen = [by_name[n] for n in dict.fromkeys(names)]  # in the order given
     else:
         n = QUICK_CASES if args.quick else args.cases
         chosen = blind_plants.select(all_cases, n, args.family)
