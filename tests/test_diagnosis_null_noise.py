@@ -1,4 +1,5 @@
-"""The drive null carries the recorded force's own noise, coloured or white.
+"""The drive null carries the recorded force's own noise, coloured or white, and no
+disturbance the force carries besides it.
 
 Oracles: the closed-form variance and lag-one correlation of an AR(1) noise
 (`x_k = ρ x_{k−1} + sqrt(1−ρ²) σ w_k`: variance σ², correlation ρ) and a closed loop
@@ -13,7 +14,7 @@ import pytest
 import scipy.signal as ss
 
 from jaxvs.data import Record
-from jaxvs.diagnosis._drive import _controller_fit, _null_records
+from jaxvs.diagnosis._drive import _controller_fit, _null_records, force_noise
 from jaxvs.diagnosis._stats import difference_noise_sigma, noise_like
 
 
@@ -85,3 +86,25 @@ def test_drive_null_force_noise_is_the_records_coloured_noise():
         assert r2s > 0.95
         assert np.std(res_s) == pytest.approx(sigma, rel=0.15)
         assert _lag1(res_s) == pytest.approx(rho, abs=0.04)
+
+
+def test_force_noise_is_the_white_part_when_the_residual_holds_pulses():
+    """Trapezoid force pulses on 60 % of the record beside a white 0.2 N noise: the
+    in-band residual is not Gaussian, so only the white part (successive differences) is
+    measurement noise -- not the pulses' in-band power, 50 times larger."""
+    rng = np.random.default_rng(5)
+    n, fs = 20_000, 1000.0
+    e = 0.2 * rng.standard_normal(n)
+    t = np.arange(n) / fs
+    for t0 in np.arange(0.5, 19.0, 1.0):
+        e += 8.0 * np.clip(np.minimum(t - t0, t0 + 0.6 - t) / 0.05, 0.0, 1.0)
+    draws = force_noise(e, fs, 100.0, np.random.default_rng(6), 4)
+    assert np.std(draws) == pytest.approx(0.2, rel=0.1)
+    assert np.mean([_lag1(d) for d in draws]) == pytest.approx(0.0, abs=0.03)
+
+
+def test_force_noise_keeps_a_gaussian_coloured_noise():
+    e = _ar1(np.random.default_rng(7), 20_000, 1.0, 0.95)
+    draws = force_noise(e, 1000.0, 100.0, np.random.default_rng(8), 4)
+    assert np.std(draws) == pytest.approx(1.0, rel=0.15)
+    assert np.mean([_lag1(d) for d in draws]) == pytest.approx(0.95, abs=0.02)

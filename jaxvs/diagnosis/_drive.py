@@ -48,6 +48,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.signal as ss
+import scipy.stats
 from jaxtyping import Array, Float
 
 from .. import models
@@ -1115,9 +1116,10 @@ class DriveFamily(AbstractFamily):
         from `r` and the measured `q` to `u`, fitted by least squares, explaining at least
         95 % of the force variance): the closed loop is simulated at the record's sampling
         with that controller, the rigid axis (exact zero-order-hold discretisation), the
-        record's quantisation step (a random encoder zero per draw) and force noise with
-        the spectrum of what the controller fit leaves of the recorded force
-        (`noise_like`: a coloured force noise keeps its in-band power). Otherwise (open loop, or no identifiable
+        record's quantisation step (a random encoder zero per draw) and the recorded
+        force's measurement noise (`force_noise`: what the controller fit leaves of the
+        force, with its own spectrum when it is Gaussian noise, else its white part).
+        Otherwise (open loop, or no identifiable
         controller) the record's own motion, low-pass filtered, is replayed: the force is
         the nominal model's, plus white noise of the record's level, the position
         re-quantised. Each simulated record then goes through the same preprocessing."""
@@ -1363,6 +1365,36 @@ def _controller_fit(
     return coef, r2, res
 
 
+GAUSSIAN_LEVEL = 0.01
+"""Significance level of the normality test (`force_noise`) below which the in-band
+controller residual is not taken as measurement noise."""
+
+
+def force_noise(
+    residual: np.ndarray, fs: float, cutoff: float, rng: np.random.Generator, count: int
+) -> np.ndarray:
+    """`count` draws of the recorded force's measurement noise, from what the identified
+    controller leaves of the force (`residual`).
+
+    A measurement noise is stationary and Gaussian; so is its in-band part, coloured or
+    not. When the in-band residual (low-passed at `cutoff`, taken every `fs/(2·cutoff)`
+    samples so that the samples are nearly independent) passes D'Agostino and Pearson's
+    normality test at `GAUSSIAN_LEVEL`, the draws have the residual's own power spectrum
+    (`noise_like`: a coloured noise keeps its in-band power). Otherwise the residual holds
+    more than noise -- force pulses injected into the drive, an anti-wind-up or other
+    nonlinearity of the controller -- and only its white part (robust successive
+    differences) is measurement noise."""
+    e = np.asarray(residual, float)
+    sos = ss.butter(4, cutoff, fs=fs, output="sos")
+    pad = int(min(e.size - 1, 3 * fs / cutoff))
+    band = ss.sosfiltfilt(sos, e - e.mean(), padlen=pad)
+    every = max(1, int(fs / (2.0 * cutoff)))
+    x = band[pad : e.size - pad : every]
+    if x.size >= 20 and scipy.stats.normaltest(x).pvalue >= GAUSSIAN_LEVEL:
+        return noise_like(e, fs, rng, count)
+    return difference_noise_sigma(e) * rng.standard_normal((count, e.size))
+
+
 def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Record]:
     q = np.asarray(rec["q"], float)
     u = np.asarray(rec["u"], float)
@@ -1391,9 +1423,7 @@ def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Recor
                 sims = None  # the identified loop does not track: replay instead
             else:
                 q_sim, u_sim = sims
-                # the recorded force's own noise: what the identified controller leaves
-                # of it, with its spectrum (a coloured noise keeps its in-band power)
-                u_sim = u_sim + noise_like(res_u, fs, rng, count)
+                u_sim = u_sim + force_noise(res_u, fs, cutoff, rng, count)
                 sims = (q_sim, u_sim)
     if sims is None:
         # replay of the record's in-band motion; the force acting at t_k + dt/2 is what a
