@@ -109,6 +109,21 @@ def _normalised(accepted: list[str], candidates: list[dict]) -> list[str]:
     return [e for e in accepted if e not in bases]
 
 
+def _noise_label(case: blind_plants.Case) -> str:
+    rho = float(case.settings.get("noise_rho", 0.0))
+    return f"coloured (ρ = {rho:g})" if rho > 0 else "white"
+
+
+def gap_band(row: dict) -> str | None:
+    """The case's held-out gap against the noise floor: `"< 3"`, `"3–20"` (the hard, small
+    size) or `"> 20"`; `None` when either is missing."""
+    g, f = row.get("gap_validation"), row.get("noise_floor")
+    if not g or not f:
+        return None
+    x = g / f
+    return "< 3" if x < 3 else ("3–20" if x <= 20 else "> 20")
+
+
 def run_case(case: blind_plants.Case, seed: int) -> dict:
     t0 = time.perf_counter()
     cal, val, info = blind_plants.generate(case)
@@ -127,6 +142,8 @@ def run_case(case: blind_plants.Case, seed: int) -> dict:
         "primary_alternatives": list(case.primary_alternatives),
         "truth": info["truth"],
         "out_of_library": ool,
+        "effect_size": float(case.settings.get("effect_size", case.settings.get("size", 1.0))),
+        "noise": _noise_label(case),
         "samples": samples,
         "generate_seconds": t_gen,
     }
@@ -304,10 +321,56 @@ def summarise(rows: list[dict]) -> dict:
             "out_of_library_median_over_floor": _median(r.get("over_floor") for r in ools),
         }
 
+    def strata(rs, key):
+        out = {}
+        for r in rs:
+            out.setdefault(key(r), []).append(r)
+        return {
+            k: {
+                "cases": len(v),
+                "primary_accuracy": _rate(r["primary_ok"] for r in v),
+                "exact_set_rate": _rate(r["exact_set"] for r in v),
+            }
+            for k, v in sorted(out.items(), key=lambda kv: str(kv[0]))
+        }
+
+    lib = [r for r in rows if not r.get("out_of_library")]
+    eff = [r for r in lib if r["effects"]]
+    free = [r for r in lib if not r["effects"]]
+    # every library effect: its single-effect cases, their gap against the floor, found?
+    effects: dict[str, list] = {}
+    for r in eff:
+        if len(r["effects"]) == 1:
+            g, f = r.get("gap_validation"), r.get("noise_floor")
+            effects.setdefault(f"{r['family']}: {r['effects'][0]}", []).append(
+                {
+                    "case": r["case"],
+                    "gap_over_floor": g / f if g and f else None,
+                    "primary_ok": r["primary_ok"],
+                    "exact_set": r["exact_set"],
+                }
+            )
     fams = sorted({r["family"] for r in rows})
     return {
         "overall": block(rows),
         "per_family": {f: block([r for r in rows if r["family"] == f]) for f in fams},
+        "by_gap": strata(eff, lambda r: gap_band(r) or "unknown"),
+        "by_noise": strata(eff, lambda r: r.get("noise", "?")),
+        "effect_free_by_noise": {
+            k: {
+                "cases": len(v),
+                "adequate": _rate(r.get("status") == "adequate" for r in v),
+                "false_positive_rate": _rate(r["false_positive"] for r in v),
+            }
+            for k, v in sorted(
+                {
+                    n: [r for r in free if r.get("noise") == n]
+                    for n in {r.get("noise") for r in free}
+                }.items(),
+                key=lambda kv: str(kv[0]),
+            )
+        },
+        "effects": effects,
     }
 
 
@@ -410,11 +473,45 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
         )
     lines += [
         "",
+        "Sensitivity by size (library effect cases; the held-out gap against the noise floor) "
+        "and by the plant's noise:",
+        "",
+        "| stratum | cases | primary right | exact set |",
+        "|---|---|---|---|",
+    ]
+    for label, group in (("gap / floor", "by_gap"), ("noise", "by_noise")):
+        for k, d in (summary.get(group) or {}).items():
+            lines.append(
+                f"| {label} {k} | {d['cases']} | {_pct(d['primary_accuracy'])} "
+                f"| {_pct(d['exact_set_rate'])} |"
+            )
+    for k, d in (summary.get("effect_free_by_noise") or {}).items():
+        lines.append(
+            f"| effect-free, noise {k} | {d['cases']} | `adequate` {_pct(d['adequate'])} "
+            f"| false positives {_pct(d['false_positive_rate'])} |"
+        )
+    lines += [
+        "",
+        "Every library effect (its single-effect cases: gap / floor, ✓ primary right, "
+        "✗ missed or named otherwise):",
+        "",
+        "| effect | cases |",
+        "|---|---|",
+    ]
+    for eff, cs in (summary.get("effects") or {}).items():
+        cells = ", ".join(
+            f"{c['case']} {_num(c['gap_over_floor'], '{:.1f}')} {'✓' if c['primary_ok'] else '✗'}"
+            for c in cs
+        )
+        lines.append(f"| {eff} | {cells} |")
+    lines += [
+        "",
         "Per case (expected → found; `primary` marks the verdict's primary effect):",
         "",
         "| case | expected | found (primary) | | status | shrink | gap / noise floor "
-        "| remainder / floor (null bound) | where the remainder lies | time (CPU) | load |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| remainder / floor (null bound) | where the remainder lies | noise | time (CPU) "
+        "| load |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         exp = ", ".join(r["effects"]) or "none"
@@ -445,6 +542,7 @@ def markdown(summary: dict, rows: list[dict], meta: dict) -> str:
             f"| {r['case']} | {exp} | {got} | {mark} | {status} | {_num(r.get('shrink'))} "
             f"| {gn} | {_num(r.get('over_floor'), '{:.1f}')} "
             f"({_num(r.get('null_bound_over_floor'), '{:.2f}')}) | {where or '—'} "
+            f"| {r.get('noise', '—')} "
             f"| {_num(r.get('seconds'), '{:.1f}')} s ({_num(r.get('cpu_seconds'), '{:.1f}')} s) "
             f"| {_num(r.get('load_average'), '{:.1f}')} |"
         )
@@ -524,7 +622,8 @@ def main(argv=None) -> int:
         unknown = set(names) - {c.name for c in all_cases}
         if unknown:
             raise SystemExit(f"unknown case(s) {sorted(unknown)}; see blind_plants.py")
-        chosen = [c for c in all_cases if c.name in names]
+        by_name = {c.name: c for c in all_cases}
+        chosen = [by_name[n] for n in dict.fromkeys(names)]  # in the order given
     else:
         n = QUICK_CASES if args.quick else args.cases
         chosen = blind_plants.select(all_cases, n, args.family)

@@ -49,6 +49,12 @@ thermal (lumped network; the nominal is the static regression of the study):
 - `speed_nonlinearity`: (A) power-law friction heat `∝ |v|^α`; (B) quadratic friction
   heat with speed-dependent convection.
 
+Sizes: the setting `effect_size` (default 1) scales an effect's magnitude (friction levels,
+backlash gap, external and position forces, tmf pure delay, thermal quadratic heat) with
+every other parameter of the plant unchanged. Each library effect has a case whose
+held-out gap is 3–20 times the noise floor (the hard, small size) and one with a larger
+gap, where the plant can make one (a delay or resonance inside a stable loop stays small).
+
 Effect-free plants (the nominal model of the family is exact) run through the same
 pipeline artefacts: quantised encoders, digital P/PI cascades at their own rate with
 velocity estimation by differencing and filters, force sample-and-hold, white and
@@ -457,7 +463,10 @@ def _drive_params(case: Case, rng: np.random.Generator) -> tuple[dict, dict]:
     }
     truth: dict[str, float] = {}
     v = case.variant
-    fc = float(rng.uniform(6, 20))
+    # `effect_size` scales the library effect's magnitude (drawn first, so that the
+    # random stream and every other parameter stay those of the unscaled plant)
+    size = float(s.get("effect_size", 1.0))
+    fc = float(rng.uniform(6, 20)) * (size if ("karnopp" in v or "dahl" in v) else 1.0)
     if "karnopp" in v or "dahl" in v:
         p["friction"] = "karnopp" if "karnopp" in v else "dahl"
         p["Fc_pos"] = p["Fc_neg"] = fc
@@ -487,7 +496,7 @@ def _drive_params(case: Case, rng: np.random.Generator) -> tuple[dict, dict]:
             p["dFv_neg"] = -float(rng.uniform(0.1, 0.2)) * p["Fv"]
     if "hertz" in v:
         ml = M * float(rng.uniform(0.3, 0.55))
-        b = float(rng.uniform(40e-6, 150e-6))
+        b = float(rng.uniform(40e-6, 150e-6)) * size
         mu = ml * (M - ml) / M
         f_c = 150.0
         F_typ = 30.0
@@ -556,12 +565,13 @@ def _drive_params(case: Case, rng: np.random.Generator) -> tuple[dict, dict]:
 def _drive_external(case, rng, n, dt, force_scale):
     """Unmeasured force on the axis as a function of time, or None."""
     v = case.variant
+    size = float(case.settings.get("effect_size", 1.0))
     T = n * dt
     if "pulses" in v:
         k = int(rng.integers(3, 6))
         t0s = np.sort(rng.uniform(0.05, 0.9, k)) * T
         width = float(rng.uniform(0.03, 0.06)) * T
-        amp = float(rng.uniform(0.4, 0.8)) * force_scale * rng.choice([-1, 1], k)
+        amp = float(rng.uniform(0.4, 0.8)) * size * force_scale * rng.choice([-1, 1], k)
         f_tooth = float(rng.uniform(20, 40)) if dt < 2e-3 else 0.0
         ramp = 0.15 * width
 
@@ -576,7 +586,7 @@ def _drive_external(case, rng, n, dt, force_scale):
         return ext, {"amplitude": float(np.mean(np.abs(amp)))}
     if "gravityload" in v:
         edges = np.sort(rng.uniform(0.05, 0.95, 4)) * T
-        amp = float(rng.uniform(0.4, 0.8)) * force_scale * float(rng.choice([-1, 1]))
+        amp = float(rng.uniform(0.4, 0.8)) * size * force_scale * float(rng.choice([-1, 1]))
         ramp = 0.02
 
         def ext(t):
@@ -591,9 +601,10 @@ def _drive_external(case, rng, n, dt, force_scale):
 
 def _drive_position(case, rng, amp_travel, force_scale, M):
     v = case.variant
+    size = float(case.settings.get("effect_size", 1.0))
     if "cogging" in v:
         pitch = amp_travel * float(rng.uniform(0.25, 0.5))
-        a1 = float(rng.uniform(0.25, 0.45)) * force_scale
+        a1 = float(rng.uniform(0.25, 0.45)) * size * force_scale
         a2 = 0.35 * a1
         ph1, ph2 = rng.uniform(0, 2 * np.pi, 2)
         k = 2 * math.pi / pitch
@@ -603,8 +614,8 @@ def _drive_position(case, rng, amp_travel, force_scale, M):
         )
     if "guideway" in v:
         lam = amp_travel * float(rng.uniform(1.5, 2.5))
-        th1 = float(rng.uniform(0.3, 0.5)) * force_scale / (M * 9.81)
-        ks = float(rng.uniform(0.2, 0.4)) * force_scale / amp_travel
+        th1 = float(rng.uniform(0.3, 0.5)) * size * force_scale / (M * 9.81)
+        ks = float(rng.uniform(0.2, 0.4)) * size * force_scale / amp_travel
         k = 2 * math.pi / lam
         return (
             lambda x: -M * 9.81 * math.sin(0.01 + th1 * math.sin(k * x)) - ks * x,
@@ -917,6 +928,7 @@ def _tmf_records(case: Case) -> tuple[list[Record], list[Record], dict]:
         truth["preload_df"] = base["preload_df"]
     if "puredelay" in v:
         m = int(rng_p.integers(int(0.6 * os_), int(2.2 * os_)))
+        m = max(1, int(round(m * float(s.get("effect_size", 1.0)))))
         truth["delay"] = m * dt_f
     if "bessel" in v:
         tau = float(rng_p.uniform(0.6, 1.8)) / fs
@@ -1115,8 +1127,9 @@ def _thermal_records(case: Case) -> tuple[list[Record], list[Record], dict]:
     tau_b = float(rng.uniform(10, 30)) * 60 if "firstorder" in v else 0.05
     two_node = "twonode" in v
     alpha = float(rng.uniform(1.6, 2.2)) if "powerlaw" in v else 1.0
-    q2 = float(rng.uniform(1.5, 3.0)) * q_b1 if "quadratic" in v else 0.0
-    gamma = 0.3 if "quadratic" in v else 0.0
+    size = float(s.get("effect_size", 1.0))
+    q2 = float(rng.uniform(1.5, 3.0)) * size * q_b1 if "quadratic" in v else 0.0
+    gamma = 0.3 * size if "quadratic" in v else 0.0
     truth: dict[str, float] = {}
     if "firstorder" in v:
         truth["tau"] = tau_b
@@ -1267,11 +1280,11 @@ DY, AT, CT, SN = "dynamics", "ambient_temperature", "coolant_temperature", "spee
 
 
 def cases() -> list[Case]:
-    """The deterministic list of blind cases (55: 16 effect-free)."""
+    """The deterministic list of blind cases (56: 16 effect-free)."""
     robot = dict(fs_rec=10, fs_ctrl=200, resolution=2e-5, speed=0.05, t_move=4.0)
     robot.update(n_cal=3000, n_val=1500, noise_u=0.3)
     drive = [
-        _d("coulomb-karnopp", [CF], "karnopp", fs_rec=1000, fs_ctrl=1000),
+        _d("coulomb-karnopp", [CF], "karnopp", fs_rec=1000, fs_ctrl=1000, effect_size=0.5),
         _d(
             "coulomb-dahl",
             [CF],
@@ -1288,6 +1301,7 @@ def cases() -> list[Case]:
             "asym-karnopp",
             [AF],
             "karnopp-asym",
+            effect_size=0.35,
             fs_rec=500,
             fs_ctrl=500,
             resolution=5e-6,
@@ -1306,7 +1320,15 @@ def cases() -> list[Case]:
             n_cal=14000,
             n_val=7000,
         ),
-        _d("stribeck-karnopp", [SF], "karnopp-stribeck", fs_rec=1000, fs_ctrl=1000, speed=0.15),
+        _d(
+            "stribeck-karnopp",
+            [SF],
+            "karnopp-stribeck",
+            fs_rec=1000,
+            fs_ctrl=1000,
+            speed=0.15,
+            effect_size=0.4,
+        ),
         _d(
             "stribeck-dahl-lorentz",
             [SF],
@@ -1325,6 +1347,19 @@ def cases() -> list[Case]:
             fs_ctrl=2000,
             nsub=4,
             resolution=1e-7,
+            n_cal=14000,
+            n_val=7000,
+        ),
+        _d(
+            "backlash-hertz-small",
+            [BL],
+            "hertz",
+            effect_size=0.1,
+            fs_rec=2000,
+            fs_ctrl=2000,
+            nsub=4,
+            resolution=1e-7,
+            noise_rho=0.9,
             n_cal=14000,
             n_val=7000,
         ),
@@ -1388,6 +1423,7 @@ def cases() -> list[Case]:
             "external-gravity-load",
             [EF],
             "gravityload",
+            effect_size=0.3,
             fs_rec=1000,
             fs_ctrl=1000,
             resolution=5e-6,
@@ -1404,7 +1440,7 @@ def cases() -> list[Case]:
             n_cal=14000,
             n_val=7000,
         ),
-        _d("position-guideway-10hz", [PD], "guideway", **robot),
+        _d("position-guideway-10hz", [PD], "guideway", effect_size=4.0, **robot),
         _d(
             "two-coulomb-delay",
             [CF, TD],
@@ -1501,18 +1537,27 @@ def cases() -> list[Case]:
             [PD],
             "preload",
             fs=5000,
+            noise_rho=0.8,
             y="column",
             ys_cal=(0.05, 0.2, 0.35, 0.5, 0.6),
             ys_val=(0.15, 0.3, 0.45),
             n_cal=15000,
             n_val=9000,
         ),
-        _t("mode-beam3", [MM], "beam3", fs=1000),
+        _t("mode-beam3", [MM], "beam3", fs=1000, noise_rho=0.8),
         _t("mode-near-nyquist", [MM], "nyquist", fs=2000),
-        _t("delay-pure", [SD], "puredelay", fs=5000, n_cal=15000, n_val=8000),
+        _t("delay-pure", [SD], "puredelay", fs=5000, n_cal=15000, n_val=8000, effect_size=3.0),
         _t("delay-antialias", [SD], "bessel", fs=10000, n_cal=16000, n_val=8000),
         _t("force-milling", [PF], "milling", fs=2000),
-        _t("force-dynamometer", [PF], "dynamometer", fs=5000, n_cal=15000, n_val=8000),
+        _t(
+            "force-dynamometer",
+            [PF],
+            "dynamometer",
+            fs=5000,
+            n_cal=15000,
+            n_val=8000,
+            noise_rho=0.8,
+        ),
         _t("two-delay-force", [SD, PF], "puredelay-milling", alt=(PF,), fs=2000),
         _t("free-1khz", [], "none", fs=1000),
         _t(
@@ -1546,16 +1591,31 @@ def cases() -> list[Case]:
             "ambient-sensor",
             [AT],
             "air_sensor",
+            noise_rho=0.9,
             dt=1.0,
             hours_cal=4.0,
             hours_val=2.0,
             dwell_s=1200.0,
         ),
         _h("coolant-conductance", [CT], "water_conductance"),
-        _h("coolant-delay", [CT], "coolant_delay", dt=5.0, hours_cal=12.0, hours_val=6.0),
+        _h(
+            "coolant-delay",
+            [CT],
+            "coolant_delay",
+            dt=5.0,
+            hours_cal=12.0,
+            hours_val=6.0,
+            noise_rho=0.8,
+        ),
         _h("speed-powerlaw", [SN], "powerlaw"),
         _h(
-            "speed-quadratic-convection", [SN], "quadratic", dt=30.0, hours_cal=48.0, hours_val=24.0
+            "speed-quadratic-convection",
+            [SN],
+            "quadratic",
+            dt=30.0,
+            hours_cal=48.0,
+            hours_val=24.0,
+            effect_size=0.4,
         ),
         _h("two-dynamics-speed", [DY, SN], "firstorder-powerlaw", alt=(SN,)),
         _h("free-5s", [], "none", dt=5.0, hours_cal=12.0, hours_val=6.0),

@@ -48,6 +48,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.signal as ss
+import scipy.stats
 from jaxtyping import Array, Float
 
 from .. import models
@@ -70,6 +71,7 @@ from ._base import (
 )
 from ._stats import (
     difference_noise_sigma,
+    noise_like,
     quantisation_step,
     white_noise_floor,
 )
@@ -1114,8 +1116,10 @@ class DriveFamily(AbstractFamily):
         from `r` and the measured `q` to `u`, fitted by least squares, explaining at least
         95 % of the force variance): the closed loop is simulated at the record's sampling
         with that controller, the rigid axis (exact zero-order-hold discretisation), the
-        record's quantisation step (a random encoder zero per draw) and white force noise
-        of the controller fit's residual level (its white part). Otherwise (open loop, or no identifiable
+        record's quantisation step (a random encoder zero per draw) and the recorded
+        force's measurement noise (`force_noise`: what the controller fit leaves of the
+        force, with its own spectrum when it is Gaussian noise, else its white part).
+        Otherwise (open loop, or no identifiable
         controller) the record's own motion, low-pass filtered, is replayed: the force is
         the nominal model's, plus white noise of the record's level, the position
         re-quantised. Each simulated record then goes through the same preprocessing."""
@@ -1331,7 +1335,19 @@ def identify_controller(
     **Returns:** `(coefficients, r2, sigma)`: coefficients in the order
     `a_0..a_{L−1}, b_0..b_{L−1}, c, d`, the share of the force variance explained, and
     the standard deviation of the residual's white part [N] (the force measurement
-    noise when the controller is linear)."""
+    noise when the controller is linear and the noise white)."""
+    coef, r2, res = _controller_fit(q, u, r, dt, taps)
+    # the white part of the residual (robust successive differences): a disturbance the
+    # record carries besides the controller output (force pulses injected into the drive)
+    # is not measurement noise and does not belong in the null
+    return coef, r2, difference_noise_sigma(res)
+
+
+def _controller_fit(
+    q: np.ndarray, u: np.ndarray, r: np.ndarray, dt: float, taps: int
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """`identify_controller`'s least squares: `(coefficients, r2, residual)`; the
+    residual is what the recorded force carries besides the controller's output."""
     n = q.size
     win = np.lib.stride_tricks.sliding_window_view
     rp = np.concatenate([np.full(taps - 1, r[0]), r])
@@ -1346,10 +1362,37 @@ def identify_controller(
     res = u - phi @ coef
     var_u = float(np.var(u))
     r2 = 1.0 - float(np.var(res)) / var_u if var_u > 0 else 0.0
-    # the white part of the residual (robust successive differences): a disturbance the
-    # record carries besides the controller output (force pulses injected into the drive)
-    # is not measurement noise and does not belong in the null
-    return coef, r2, difference_noise_sigma(res)
+    return coef, r2, res
+
+
+GAUSSIAN_LEVEL = 0.01
+"""Significance level of the normality test (`force_noise`) below which the in-band
+controller residual is not taken as measurement noise."""
+
+
+def force_noise(
+    residual: np.ndarray, fs: float, cutoff: float, rng: np.random.Generator, count: int
+) -> np.ndarray:
+    """`count` draws of the recorded force's measurement noise, from what the identified
+    controller leaves of the force (`residual`).
+
+    A measurement noise is stationary and Gaussian; so is its in-band part, coloured or
+    not. When the in-band residual (low-passed at `cutoff`, taken every `fs/(2·cutoff)`
+    samples so that the samples are nearly independent) passes D'Agostino and Pearson's
+    normality test at `GAUSSIAN_LEVEL`, the draws have the residual's own power spectrum
+    (`noise_like`: a coloured noise keeps its in-band power). Otherwise the residual holds
+    more than noise -- force pulses injected into the drive, an anti-wind-up or other
+    nonlinearity of the controller -- and only its white part (robust successive
+    differences) is measurement noise."""
+    e = np.asarray(residual, float)
+    sos = ss.butter(4, cutoff, fs=fs, output="sos")
+    pad = int(min(e.size - 1, 3 * fs / cutoff))
+    band = ss.sosfiltfilt(sos, e - e.mean(), padlen=pad)
+    every = max(1, int(fs / (2.0 * cutoff)))
+    x = band[pad : e.size - pad : every]
+    if x.size >= 20 and scipy.stats.normaltest(x).pvalue >= GAUSSIAN_LEVEL:
+        return noise_like(e, fs, rng, count)
+    return difference_noise_sigma(e) * rng.standard_normal((count, e.size))
 
 
 def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Record]:
@@ -1369,7 +1412,7 @@ def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Recor
     if "r" in rec.names and mass > 0:  # a fixed zero mass: no loop to simulate, replay
         r = np.asarray(rec["r"], float)
         taps = int(options.get("controller_taps", 16))
-        coef, r2, sigma_u = identify_controller(q, u, r, dt, taps)
+        coef, r2, res_u = _controller_fit(q, u, r, dt, taps)
         if r2 >= 0.95:
             sims = _closed_loop(coef, taps, r, q[0], mass, fv, off, dt, quantise, count)
             track = float(np.sqrt(np.mean((q - r) ** 2))) + 10 * max(step, sigma_q)
@@ -1380,7 +1423,7 @@ def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Recor
                 sims = None  # the identified loop does not track: replay instead
             else:
                 q_sim, u_sim = sims
-                u_sim = u_sim + sigma_u * rng.standard_normal(u_sim.shape)
+                u_sim = u_sim + force_noise(res_u, fs, cutoff, rng, count)
                 sims = (q_sim, u_sim)
     if sims is None:
         # replay of the record's in-band motion; the force acting at t_k + dt/2 is what a

@@ -25,6 +25,7 @@ __all__ = [
     "block_length",
     "gap_change_interval",
     "nrmse",
+    "noise_like",
     "white_noise_floor",
 ]
 
@@ -122,6 +123,31 @@ def white_noise_floor(
         sel = f >= 0.5 * fs / 2
     s0 = float(np.median(pxx[sel]))
     return s0, math.sqrt(s0 * fs / 2.0)
+
+
+def noise_like(
+    residual: np.ndarray, fs: float, rng: np.random.Generator, count: int
+) -> np.ndarray:
+    """`count` Gaussian draws of the length of `residual` with its power spectrum.
+
+    The spectrum is the residual's Welch estimate with the **median** over segments
+    (Bartlett-bias corrected): a disturbance confined to a few segments (pulses, a
+    transient) does not raise it, while a coloured measurement noise is carried with its
+    in-band power -- what a white estimate from the differences or the top of the spectrum
+    misses by the noise's correlation time. Each draw is white Gaussian noise shaped in
+    the frequency domain, `Y(f) = W(f)·sqrt(S(f)·fs/2)` (a white unit-variance sequence has
+    the one-sided PSD `2/fs`), so its PSD is `S`.
+
+    **Returns:** array `(count, len(residual))`.
+    """
+    e = np.asarray(residual, float)
+    n = e.size
+    nper = int(min(n, 1024))
+    f, pxx = ss.welch(e - e.mean(), fs=fs, nperseg=nper, average="median")
+    fk = np.fft.rfftfreq(n, 1.0 / fs)
+    gain = np.sqrt(np.maximum(np.interp(fk, f, pxx), 0.0) * fs / 2.0)
+    w = np.fft.rfft(rng.standard_normal((count, n)), axis=1)
+    return np.fft.irfft(w * gain, n=n, axis=1)
 
 
 def difference_noise_sigma(residual: np.ndarray) -> float:
