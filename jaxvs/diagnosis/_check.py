@@ -50,6 +50,10 @@ class CheckReport:
 
     def __init__(self, content: dict[str, Any]):
         self.content = content
+        # the prepared experiments and the nominal model's initial fit, when the check got
+        # that far (`jaxvs.diagnose` goes on from them instead of preparing them again)
+        self.experiments: list[Any] | None = None
+        self.nominal_model: Any = None
 
     @property
     def ok(self) -> bool:
@@ -338,9 +342,12 @@ def check_records(
         "warnings": warnings,
         "jacobian": None,
     }
+    experiments: list[Any] | None = None
+    initial = None
     try:
         experiments = [fam.prepare(record, name) for record, name in recs]
-        nominal = unwrap(fam.nominal(experiments))
+        initial = fam.nominal(experiments)
+        nominal = unwrap(initial)
     except NotIdentifiable as error:
         blocking.append(f"the nominal model is not identifiable: {error}")
     except ValueError as error:
@@ -368,4 +375,7 @@ def check_records(
                 f"largest).{todo}"
             )
     content["identifiable"] = not blocking
-    return CheckReport(content)
+    report = CheckReport(content)
+    if initial is not None:
+        report.experiments, report.nominal_model = experiments, initial
+    return report

@@ -529,6 +529,7 @@ def search(
     seed: int = 0,
     stop_at_noise: float = 1.1,
     progress: Callable[[str], None] | None = None,
+    initial: Any = None,
 ) -> SearchResult:
     """Nominal recalibration, the identifiability check, the null, then the greedy
     augment-and-recalibrate loop (module doc).
@@ -545,6 +546,8 @@ def search(
     fit made the held-out gap worse before: the residual it is fitted to changes with
     each accepted effect (a delay fitted beside unmodelled friction imitates the
     friction, and is only judged fairly once the friction is in the model).
+    `initial`: the nominal model's start `family.nominal(calibration)` when the caller
+    has it already (`jaxvs check` fits it on the same experiments).
     """
     say = progress or (lambda msg: None)
     rng = np.random.default_rng(seed)
@@ -569,7 +572,13 @@ def search(
     # the nominal model alone: a layout without slots (one call per start)
     bare = Layout([], exps[0].arrays.keys(), batch=1)
     (model,), cost, _, (pred,) = fit_many(
-        [GapModel(family.nominal(calibration))], [None], exps, n_cal_exp, scale, max_steps, bare
+        [GapModel(family.nominal(calibration) if initial is None else initial)],
+        [None],
+        exps,
+        n_cal_exp,
+        scale,
+        max_steps,
+        bare,
     )
     nominal_model = model
     res_all = [e.y - p for e, p in zip(exps, pred)]
