@@ -192,6 +192,21 @@ def child(args) -> dict:
     for mod in (diag_mod, engine_mod):
         mod.gap_change_interval = timed(mod.gap_change_interval)
 
+    compile_log: list[tuple[str, str]] = []
+    if args.profile:
+        import logging
+
+        class _Log(logging.Handler):
+            def emit(self, record):
+                msg = record.getMessage()
+                if "Finished XLA compilation" in msg or "Compiling" in msg:
+                    compile_log.append((stages.stage, msg[:200]))
+
+        jax.config.update("jax_log_compiles", True)
+        logger = logging.getLogger("jax")
+        logger.addHandler(_Log())
+        logger.propagate = False
+
     load0 = os.getloadavg()
     profiler = None
     if args.profile:
@@ -211,8 +226,12 @@ def child(args) -> dict:
         import pstats
 
         profiler.disable()
+        if os.environ.get("DIAGNOSIS_SPEED_PSTATS"):  # the raw statistics, for pstats
+            profiler.dump_stats(os.environ["DIAGNOSIS_SPEED_PSTATS"])
         buf = io.StringIO()
         pstats.Stats(profiler, stream=buf).sort_stats("cumulative").print_stats(60)
+        buf.write("\n\nXLA compilations (stage, message):\n")
+        buf.writelines(f"{st}: {m}\n" for st, m in compile_log)
         (RESULTS / "diagnosis_speed_profile.txt").write_text(buf.getvalue())
     content = rep.to_json()
     return {
@@ -343,6 +362,7 @@ def main() -> None:
     p.add_argument("--label", default="after", help="name of this set of runs (kept apart)")
     p.add_argument("--repeat", type=int, default=1, help="fresh processes to measure")
     p.add_argument("--profile", action="store_true", help="cProfile one run")
+    p.add_argument("--commit", default=None, help="commit measured (default: HEAD)")
     p.add_argument("--case", default=CASE, help=argparse.SUPPRESS)
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args()
@@ -351,7 +371,7 @@ def main() -> None:
         return
     path = RESULTS / "diagnosis_speed.json"
     results = json.loads(path.read_text()) if path.exists() else {"runs": {}}
-    commit = subprocess.run(
+    commit = args.commit or subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=HERE
     ).stdout.strip()
     runs = []

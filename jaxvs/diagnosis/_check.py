@@ -249,11 +249,14 @@ def _jacobian_report(
     params, static = eqx.partition(nominal, eqx.is_inexact_array)
     flat, unravel = jax.flatten_util.ravel_pytree(params)
 
-    def predict(theta):
+    def predict(theta, arrays):
         model = GapModel(eqx.combine(unravel(theta), static))
-        return jnp.concatenate([model(e.jax_arrays()) for e in experiments])
+        return jnp.concatenate([model(a) for a in arrays])
 
-    J = np.asarray(jax.jacfwd(predict)(flat))
+    # one compiled program (op-by-op differentiation through the simulation's scan would
+    # compile every primitive on its own, several times slower)
+    jacobian = jax.jit(jax.jacfwd(predict))
+    J = np.asarray(jacobian(flat, [e.jax_arrays() for e in experiments]))
     scale = np.linalg.norm(J, axis=0)
     scale[scale == 0] = 1.0
     _, s, vt = np.linalg.svd(J / scale, full_matrices=False)

@@ -59,9 +59,10 @@ __all__ = ["CandidateResult", "SearchResult", "search"]
 # ------------------------------------------------------------------------------ batching
 
 
-def stack(experiments: Sequence[Experiment], scale: float) -> dict[str, jnp.ndarray]:
+def stack(experiments: Sequence[Experiment], scale: float) -> dict[str, np.ndarray]:
     """Pad experiments to a common length (edge values) and stack them; `"w"` holds the
-    residual weight (`scale` on real samples, 0 on padding)."""
+    residual weight (`scale` on real samples, 0 on padding). NumPy arrays: the batches
+    are cut and copied on the host, where no operation needs compiling."""
     n_max = max(e.n for e in experiments)
     keys = experiments[0].arrays.keys()
     out: dict[str, Any] = {}
@@ -73,11 +74,11 @@ def stack(experiments: Sequence[Experiment], scale: float) -> dict[str, jnp.ndar
             cols = [np.pad(c, ((0, n_max - c.shape[0]), (0, 0))) for c in cols]
         else:
             cols = [np.pad(c, (0, n_max - c.size), mode="edge") for c in cols]
-        out[k] = jnp.asarray(np.stack(cols))
+        out[k] = np.stack(cols)
     w = np.zeros((len(experiments), n_max))
     for i, e in enumerate(experiments):
         w[i, : e.n] = scale
-    out["w"] = jnp.asarray(w)
+    out["w"] = w
     return out
 
 
@@ -106,7 +107,10 @@ def _stack_models(models: Sequence[GapModel]) -> GapModel:
     """Stack models of one structure along a new leading axis of every array leaf."""
     arrays = [eqx.filter(m, eqx.is_array) for m in models]
     static = eqx.filter(models[0], eqx.is_array, inverse=True)
-    stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *arrays)
+    # stacked on the host (an eager `jnp.stack` compiles once per shape)
+    stacked = jax.tree_util.tree_map(
+        lambda *xs: jnp.asarray(np.stack([np.asarray(x) for x in xs])), *arrays
+    )
     return eqx.combine(stacked, static)
 
 
@@ -129,13 +133,15 @@ def fit_many(
     per_model = not isinstance(experiments[0], Experiment)
     if per_model:
         batches = [stack(list(e), scale) for e in experiments]
-        batch = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *batches)
-        wfit = batch["w"].at[:, n_cal:].set(0.0)
+        batch = {k: np.stack([b[k] for b in batches]) for k in batches[0]}
+        wfit = batch["w"].copy()
+        wfit[:, n_cal:] = 0.0
         data_axis = 0
         exp_lists = [list(e) for e in experiments]
     else:
         batch = stack(experiments, scale)
-        wfit = batch["w"].at[n_cal:].set(0.0)
+        wfit = batch["w"].copy()
+        wfit[n_cal:] = 0.0
         data_axis = None
         exp_lists = [list(experiments)] * len(models)
     if not layout.covers(models[0]) or not layout.keys <= set(batch):
@@ -311,9 +317,12 @@ def _fit_layout(layout: Layout, models, slots, batch, wfit, max_steps, data_axis
     for f, (m, s) in zip(cms, zip(models, slots)):
         slot = None if s is None else layout.names.index(m.effects[s].name)
         psize.append(_fixed_size_selector(f, slot, size_width))
+    # the data of each call on the host (NumPy: cutting and copying compile nothing)
+    batch = {k: np.asarray(v) for k, v in batch.items()}
+    wfit = np.asarray(wfit)
     if data_axis is None:  # every start sees the same data: one copy per start
-        batch = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (count,) + x.shape), batch)
-        wfit = jnp.broadcast_to(wfit, (count,) + wfit.shape)
+        batch = {k: np.broadcast_to(v, (count,) + v.shape) for k, v in batch.items()}
+        wfit = np.broadcast_to(wfit, (count,) + wfit.shape)
     # calls of exactly `layout.batch` starts (the last one padded): one compiled function
     b = layout.batch
     n_pad = -count % b
@@ -326,7 +335,7 @@ def _fit_layout(layout: Layout, models, slots, batch, wfit, max_steps, data_axis
     for c0 in range(0, idx.size, b):
         part = idx[c0 : c0 + b]
         arrays, static = eqx.partition(_stack_models(cms[c0 : c0 + b]), eqx.is_array)
-        take = lambda x: x[jnp.asarray(part)]  # noqa: E731
+        take = lambda x: jnp.asarray(x[part])  # noqa: E731
         outs.append(
             _fit_fixed(
                 arrays,
@@ -341,11 +350,11 @@ def _fit_layout(layout: Layout, models, slots, batch, wfit, max_steps, data_axis
             )
         )
     out, cost, cost_start, pred = jax.tree_util.tree_map(
-        lambda *xs: jnp.concatenate(xs)[:count], *outs
+        lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:count], *outs
     )
     fitted = []
     for i in range(count):
-        arr_i = jax.tree_util.tree_map(lambda x: x[i], out)
+        arr_i = jax.tree_util.tree_map(lambda x: jnp.asarray(x[i]), out)
         fitted.append(layout.back(eqx.combine(arr_i, static), models[i]))
     return fitted, cost, cost_start, pred
 
