@@ -578,17 +578,13 @@ def search(
         )
 
     say("recalibrating the nominal model")
-    # the nominal model alone: a layout without slots (one call per start)
-    bare = Layout([], exps[0].arrays.keys(), batch=1)
-    (model,), cost, _, (pred,) = fit_many(
-        [GapModel(family.nominal(calibration) if initial is None else initial)],
-        [None],
-        exps,
-        n_cal_exp,
-        scale,
-        max_steps,
-        bare,
-    )
+    start = GapModel(family.nominal(calibration) if initial is None else initial)
+    # the nominal model through the search's own structure when the family can say it
+    # before the calibration (one compilation for the whole search), else a layout
+    # without slots (one call per start)
+    layout = _early_layout(family, library, candidates, start, exps, n_cal_exp)
+    bare = layout or Layout([], exps[0].arrays.keys(), batch=1)
+    (model,), cost, _, (pred,) = fit_many([start], [None], exps, n_cal_exp, scale, max_steps, bare)
     nominal_model = model
     res_all = [e.y - p for e, p in zip(exps, pred)]
     nominal_residuals = list(res_all)
@@ -636,7 +632,7 @@ def search(
     say(f"noise floor (median gap of the nominal model on the null records): {noise_floor:.4g}")
 
     dof0 = _dof(model, exps[:n_cal_exp])
-    layout: Layout | None = None
+    early = layout is not None
     null_stale = False
     for rnd in range(1, max_effects + 1):
         ssr0 = float(cost[0])
@@ -670,13 +666,19 @@ def search(
         t_round = time.perf_counter()
         round_results: list[CandidateResult] = []
         all_templates = {s.name: s.templates(ctx) for s in open_specs}
-        if layout is None:
-            # one fixed structure for the rest of the search (Layout)
-            layout = Layout(
+        if layout is None or early:
+            # one fixed structure for the rest of the search (Layout); the early one when
+            # the calibrated model's templates have its structure (they take its place)
+            fresh = Layout(
                 [all_templates[s.name][0] for s in library if all_templates.get(s.name)],
                 exps[0].arrays.keys(),
                 batch=max(len(t) for t in all_templates.values()),
             )
+            if layout is not None and _same_structure(layout, fresh):
+                layout.defaults = fresh.defaults
+            else:
+                layout = fresh
+            early = False
         for s in open_specs:
             templates = all_templates[s.name]
             if not templates:
@@ -851,6 +853,39 @@ def search(
     )
     primary = primary_effect(accepted, candidates)
     return result(noise_floor=noise_floor, null_gaps=null_gaps, primary=primary, pruning=pruning)
+
+
+def _early_layout(family, library, candidates, start, exps, n_cal_exp) -> Layout | None:
+    """The search's [`Layout`][] before the nominal calibration, from the templates of the
+    uncalibrated start, for a family that says its templates' structure does not depend
+    on the calibration (`family.early_layout`) and a library that refreshes no data; the
+    first round checks the structure and puts its own templates in. `None` otherwise."""
+    if not getattr(family, "early_layout", False) or any(s.refresh for s in library):
+        return None
+    cal = exps[:n_cal_exp]
+    ctx = Context(start, cal, [e.y for e in cal], family.options)
+    templates = {s.name: s.templates(ctx) for s in library if candidates[s.name].testable}
+    defaults = [templates[s.name][0] for s in library if templates.get(s.name)]
+    if not defaults:
+        return None
+    return Layout(defaults, exps[0].arrays.keys(), batch=max(len(t) for t in templates.values()))
+
+
+def _same_structure(a: Layout, b: Layout) -> bool:
+    """Whether two layouts compile to the same function: slots, batch, data and, slot by
+    slot, the same tree, static fields, shapes and dtypes."""
+    if (a.names, a.batch, a.keys) != (b.names, b.batch, b.keys):
+        return False
+    for x, y in zip(a.defaults, b.defaults):
+        x, y = x.constrained(), y.constrained()
+        if jax.tree_util.tree_structure(x) != jax.tree_util.tree_structure(y):
+            return False
+        lx, ly = jax.tree_util.tree_leaves(x), jax.tree_util.tree_leaves(y)
+        if [(np.shape(v), np.result_type(v)) for v in lx] != [
+            (np.shape(v), np.result_type(v)) for v in ly
+        ]:
+            return False
+    return True
 
 
 def _refreshed(refreshers, null_sets, null_res):
