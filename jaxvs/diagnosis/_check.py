@@ -54,6 +54,10 @@ class CheckReport:
 
     def __init__(self, content: dict[str, Any]):
         self.content = content
+        # the prepared experiments and the nominal model's initial fit, when the check got
+        # that far (`jaxvs.diagnose` goes on from them instead of preparing them again)
+        self.experiments: list[Any] | None = None
+        self.nominal_model: Any = None
 
     def to_json(self) -> dict[str, Any]:
         """`report.json`: the content with its `schema_version`, JSON-ready."""
@@ -253,11 +257,14 @@ def _jacobian_report(
     params, static = eqx.partition(nominal, eqx.is_inexact_array)
     flat, unravel = jax.flatten_util.ravel_pytree(params)
 
-    def predict(theta):
+    def predict(theta, arrays):
         model = GapModel(eqx.combine(unravel(theta), static))
-        return jnp.concatenate([model(e.jax_arrays()) for e in experiments])
+        return jnp.concatenate([model(a) for a in arrays])
 
-    J = np.asarray(jax.jacfwd(predict)(flat))
+    # one compiled program (op-by-op differentiation through the simulation's scan would
+    # compile every primitive on its own, several times slower)
+    jacobian = jax.jit(jax.jacfwd(predict))
+    J = np.asarray(jacobian(flat, [e.jax_arrays() for e in experiments]))
     scale = np.linalg.norm(J, axis=0)
     scale[scale == 0] = 1.0
     _, s, vt = np.linalg.svd(J / scale, full_matrices=False)
@@ -346,9 +353,12 @@ def check_records(
         "warnings": warnings,
         "jacobian": None,
     }
+    experiments: list[Any] | None = None
+    initial = None
     try:
         experiments = [fam.prepare(record, name) for record, name in recs]
-        nominal = unwrap(fam.nominal(experiments))
+        initial = fam.nominal(experiments)
+        nominal = unwrap(initial)
     except NotIdentifiable as error:
         blocking.append(f"the nominal model is not identifiable: {error}")
     except ValueError as error:
@@ -376,4 +386,7 @@ def check_records(
                 f"largest).{todo}"
             )
     content["identifiable"] = not blocking
-    return CheckReport(content)
+    report = CheckReport(content)
+    if initial is not None:
+        report.experiments, report.nominal_model = experiments, initial
+    return report

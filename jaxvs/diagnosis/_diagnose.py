@@ -277,13 +277,16 @@ def diagnose(
 
     _memory_check(fam, sum(len(r) for r, _ in cal_recs + val_recs), "diagnose", _SEARCH_VALUES)
     say("checking the calibration data (jaxvs check)")
-    checked = check_records(fam, cal_recs, raise_value_errors=True).content
+    check_report = check_records(fam, cal_recs, raise_value_errors=True)
+    checked = check_report.content
     if checked["blocking"]:
         why = "jaxvs check: " + " ".join(checked["blocking"])
         return _not_identifiable_report(fam, why, cal_recs, val_recs, how, t_start, None, checked)
     say(f"preparing {len(cal_recs)} calibration and {len(val_recs)} validation experiment(s)")
     try:
-        cal = [fam.prepare(r, n) for r, n in cal_recs]
+        # the check prepared the calibration experiments and fitted the nominal model's
+        # start on them already: the same calls on the same records, not made twice
+        cal = check_report.experiments or [fam.prepare(r, n) for r, n in cal_recs]
         val = [fam.prepare(r, n) for r, n in val_recs]
     except NotIdentifiable as err:
         return _not_identifiable_report(
@@ -301,6 +304,7 @@ def diagnose(
         n_null=n_null,
         seed=seed,
         progress=say,
+        initial=check_report.nominal_model if check_report.experiments else None,
     )
     if res.not_identifiable is not None:
         return _not_identifiable_report(

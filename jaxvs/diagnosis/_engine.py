@@ -59,9 +59,10 @@ __all__ = ["CandidateResult", "SearchResult", "search"]
 # ------------------------------------------------------------------------------ batching
 
 
-def stack(experiments: Sequence[Experiment], scale: float) -> dict[str, jnp.ndarray]:
+def stack(experiments: Sequence[Experiment], scale: float) -> dict[str, np.ndarray]:
     """Pad experiments to a common length (edge values) and stack them; `"w"` holds the
-    residual weight (`scale` on real samples, 0 on padding)."""
+    residual weight (`scale` on real samples, 0 on padding). NumPy arrays: the batches
+    are cut and copied on the host, where no operation needs compiling."""
     n_max = max(e.n for e in experiments)
     keys = experiments[0].arrays.keys()
     out: dict[str, Any] = {}
@@ -73,11 +74,11 @@ def stack(experiments: Sequence[Experiment], scale: float) -> dict[str, jnp.ndar
             cols = [np.pad(c, ((0, n_max - c.shape[0]), (0, 0))) for c in cols]
         else:
             cols = [np.pad(c, (0, n_max - c.size), mode="edge") for c in cols]
-        out[k] = jnp.asarray(np.stack(cols))
+        out[k] = np.stack(cols)
     w = np.zeros((len(experiments), n_max))
     for i, e in enumerate(experiments):
         w[i, : e.n] = scale
-    out["w"] = jnp.asarray(w)
+    out["w"] = w
     return out
 
 
@@ -106,7 +107,10 @@ def _stack_models(models: Sequence[GapModel]) -> GapModel:
     """Stack models of one structure along a new leading axis of every array leaf."""
     arrays = [eqx.filter(m, eqx.is_array) for m in models]
     static = eqx.filter(models[0], eqx.is_array, inverse=True)
-    stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *arrays)
+    # stacked on the host (an eager `jnp.stack` compiles once per shape)
+    stacked = jax.tree_util.tree_map(
+        lambda *xs: jnp.asarray(np.stack([np.asarray(x) for x in xs])), *arrays
+    )
     return eqx.combine(stacked, static)
 
 
@@ -129,13 +133,15 @@ def fit_many(
     per_model = not isinstance(experiments[0], Experiment)
     if per_model:
         batches = [stack(list(e), scale) for e in experiments]
-        batch = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *batches)
-        wfit = batch["w"].at[:, n_cal:].set(0.0)
+        batch = {k: np.stack([b[k] for b in batches]) for k in batches[0]}
+        wfit = batch["w"].copy()
+        wfit[:, n_cal:] = 0.0
         data_axis = 0
         exp_lists = [list(e) for e in experiments]
     else:
         batch = stack(experiments, scale)
-        wfit = batch["w"].at[n_cal:].set(0.0)
+        wfit = batch["w"].copy()
+        wfit[n_cal:] = 0.0
         data_axis = None
         exp_lists = [list(experiments)] * len(models)
     if not layout.covers(models[0]) or not layout.keys <= set(batch):
@@ -311,9 +317,12 @@ def _fit_layout(layout: Layout, models, slots, batch, wfit, max_steps, data_axis
     for f, (m, s) in zip(cms, zip(models, slots)):
         slot = None if s is None else layout.names.index(m.effects[s].name)
         psize.append(_fixed_size_selector(f, slot, size_width))
+    # the data of each call on the host (NumPy: cutting and copying compile nothing)
+    batch = {k: np.asarray(v) for k, v in batch.items()}
+    wfit = np.asarray(wfit)
     if data_axis is None:  # every start sees the same data: one copy per start
-        batch = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (count,) + x.shape), batch)
-        wfit = jnp.broadcast_to(wfit, (count,) + wfit.shape)
+        batch = {k: np.broadcast_to(v, (count,) + v.shape) for k, v in batch.items()}
+        wfit = np.broadcast_to(wfit, (count,) + wfit.shape)
     # calls of exactly `layout.batch` starts (the last one padded): one compiled function
     b = layout.batch
     n_pad = -count % b
@@ -326,7 +335,7 @@ def _fit_layout(layout: Layout, models, slots, batch, wfit, max_steps, data_axis
     for c0 in range(0, idx.size, b):
         part = idx[c0 : c0 + b]
         arrays, static = eqx.partition(_stack_models(cms[c0 : c0 + b]), eqx.is_array)
-        take = lambda x: x[jnp.asarray(part)]  # noqa: E731
+        take = lambda x: jnp.asarray(x[part])  # noqa: E731
         outs.append(
             _fit_fixed(
                 arrays,
@@ -341,11 +350,11 @@ def _fit_layout(layout: Layout, models, slots, batch, wfit, max_steps, data_axis
             )
         )
     out, cost, cost_start, pred = jax.tree_util.tree_map(
-        lambda *xs: jnp.concatenate(xs)[:count], *outs
+        lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:count], *outs
     )
     fitted = []
     for i in range(count):
-        arr_i = jax.tree_util.tree_map(lambda x: x[i], out)
+        arr_i = jax.tree_util.tree_map(lambda x: jnp.asarray(x[i]), out)
         fitted.append(layout.back(eqx.combine(arr_i, static), models[i]))
     return fitted, cost, cost_start, pred
 
@@ -529,6 +538,7 @@ def search(
     seed: int = 0,
     stop_at_noise: float = 1.1,
     progress: Callable[[str], None] | None = None,
+    initial: Any = None,
 ) -> SearchResult:
     """Nominal recalibration, the identifiability check, the null, then the greedy
     augment-and-recalibrate loop (module doc).
@@ -545,6 +555,8 @@ def search(
     fit made the held-out gap worse before: the residual it is fitted to changes with
     each accepted effect (a delay fitted beside unmodelled friction imitates the
     friction, and is only judged fairly once the friction is in the model).
+    `initial`: the nominal model's start `family.nominal(calibration)` when the caller
+    has it already (`jaxvs check` fits it on the same experiments).
     """
     say = progress or (lambda msg: None)
     rng = np.random.default_rng(seed)
@@ -566,11 +578,13 @@ def search(
         )
 
     say("recalibrating the nominal model")
-    # the nominal model alone: a layout without slots (one call per start)
-    bare = Layout([], exps[0].arrays.keys(), batch=1)
-    (model,), cost, _, (pred,) = fit_many(
-        [GapModel(family.nominal(calibration))], [None], exps, n_cal_exp, scale, max_steps, bare
-    )
+    start = GapModel(family.nominal(calibration) if initial is None else initial)
+    # the nominal model through the search's own structure when the family can say it
+    # before the calibration (one compilation for the whole search), else a layout
+    # without slots (one call per start)
+    layout = _early_layout(family, library, candidates, start, exps, n_cal_exp)
+    bare = layout or Layout([], exps[0].arrays.keys(), batch=1)
+    (model,), cost, _, (pred,) = fit_many([start], [None], exps, n_cal_exp, scale, max_steps, bare)
     nominal_model = model
     res_all = [e.y - p for e, p in zip(exps, pred)]
     nominal_residuals = list(res_all)
@@ -618,7 +632,7 @@ def search(
     say(f"noise floor (median gap of the nominal model on the null records): {noise_floor:.4g}")
 
     dof0 = _dof(model, exps[:n_cal_exp])
-    layout: Layout | None = None
+    early = layout is not None
     null_stale = False
     for rnd in range(1, max_effects + 1):
         ssr0 = float(cost[0])
@@ -652,13 +666,19 @@ def search(
         t_round = time.perf_counter()
         round_results: list[CandidateResult] = []
         all_templates = {s.name: s.templates(ctx) for s in open_specs}
-        if layout is None:
-            # one fixed structure for the rest of the search (Layout)
-            layout = Layout(
+        if layout is None or early:
+            # one fixed structure for the rest of the search (Layout); the early one when
+            # the calibrated model's templates have its structure (they take its place)
+            fresh = Layout(
                 [all_templates[s.name][0] for s in library if all_templates.get(s.name)],
                 exps[0].arrays.keys(),
                 batch=max(len(t) for t in all_templates.values()),
             )
+            if layout is not None and _same_structure(layout, fresh):
+                layout.defaults = fresh.defaults
+            else:
+                layout = fresh
+            early = False
         for s in open_specs:
             templates = all_templates[s.name]
             if not templates:
@@ -833,6 +853,39 @@ def search(
     )
     primary = primary_effect(accepted, candidates)
     return result(noise_floor=noise_floor, null_gaps=null_gaps, primary=primary, pruning=pruning)
+
+
+def _early_layout(family, library, candidates, start, exps, n_cal_exp) -> Layout | None:
+    """The search's [`Layout`][] before the nominal calibration, from the templates of the
+    uncalibrated start, for a family that says its templates' structure does not depend
+    on the calibration (`family.early_layout`) and a library that refreshes no data; the
+    first round checks the structure and puts its own templates in. `None` otherwise."""
+    if not getattr(family, "early_layout", False) or any(s.refresh for s in library):
+        return None
+    cal = exps[:n_cal_exp]
+    ctx = Context(start, cal, [e.y for e in cal], family.options)
+    templates = {s.name: s.templates(ctx) for s in library if candidates[s.name].testable}
+    defaults = [templates[s.name][0] for s in library if templates.get(s.name)]
+    if not defaults:
+        return None
+    return Layout(defaults, exps[0].arrays.keys(), batch=max(len(t) for t in templates.values()))
+
+
+def _same_structure(a: Layout, b: Layout) -> bool:
+    """Whether two layouts compile to the same function: slots, batch, data and, slot by
+    slot, the same tree, static fields, shapes and dtypes."""
+    if (a.names, a.batch, a.keys) != (b.names, b.batch, b.keys):
+        return False
+    for x, y in zip(a.defaults, b.defaults):
+        x, y = x.constrained(), y.constrained()
+        if jax.tree_util.tree_structure(x) != jax.tree_util.tree_structure(y):
+            return False
+        lx, ly = jax.tree_util.tree_leaves(x), jax.tree_util.tree_leaves(y)
+        if [(np.shape(v), np.result_type(v)) for v in lx] != [
+            (np.shape(v), np.result_type(v)) for v in ly
+        ]:
+            return False
+    return True
 
 
 def _refreshed(refreshers, null_sets, null_res):

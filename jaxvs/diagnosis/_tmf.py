@@ -729,6 +729,9 @@ class TMFFamily(AbstractFamily):
     optional = ("y", "f")
     option_keys = ("order", "coherence", "fir_taps")
     target_label = "tool-side motion x_t"
+    # the templates' shapes follow from the nominal model's structure alone: the search
+    # calibrates the nominal model through its own structure (one compilation)
+    early_layout = True
 
     def __init__(self, **options: Any):
         super().__init__(**options)
