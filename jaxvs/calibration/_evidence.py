@@ -114,7 +114,7 @@ def _columns(groups: Sequence[Sequence[int]], support) -> np.ndarray:
     return np.concatenate([np.asarray(groups[j], int) for j in support])
 
 
-def _eliminate(gram: _Gram, groups, m: float, g: float) -> EvidenceSelection:
+def _eliminate(gram: _Gram, groups, m: float, g: float, margin: float = 0.0) -> EvidenceSelection:
     support = list(range(len(groups)))
     k_of = [len(gr) for gr in groups]
     ssr0 = gram.yy
@@ -128,7 +128,7 @@ def _eliminate(gram: _Gram, groups, m: float, g: float) -> EvidenceSelection:
     while support:
         trials = [(ev([s for s in support if s != j]), j) for j in support]
         best, j = max(trials)
-        if not best > current:
+        if not best > current - margin:
             break
         support.remove(j)
         current = best
@@ -163,6 +163,7 @@ def backward_elimination(
     base=None,
     n_eff: float | None = None,
     g: float | None = None,
+    margin: float = 0.0,
 ) -> EvidenceSelection:
     """Backward elimination of groups of columns on the g-prior evidence (module doc).
 
@@ -173,6 +174,8 @@ def backward_elimination(
     - `base`: `(n, p)` columns always in the model (profiled out), or `None`.
     - `n_eff`: effective number of samples (default `n`); `g`: the prior scale
         (default `n_eff`, the unit-information prior).
+    - `margin`: a group stays only when it raises the log evidence by more than this
+        (default 0; 5 is a Bayes factor of e⁵, the ΔBIC of 10 named effects must pass).
     """
     groups = [[j] for j in range(np.shape(X)[1])] if groups is None else [list(gr) for gr in groups]
     _check(X, y, groups)
@@ -180,7 +183,7 @@ def backward_elimination(
     n_eff = float(n if n_eff is None else min(max(n_eff, 2.0), n))
     p_b = 0 if base is None else int(np.asarray(base).reshape(n, -1).shape[1])
     g = n_eff if g is None else float(g)
-    return _eliminate(_Gram(X, y, base, None), groups, n_eff - p_b, g)
+    return _eliminate(_Gram(X, y, base, None), groups, n_eff - p_b, g, margin)
 
 
 def stability_selection(
@@ -192,6 +195,7 @@ def stability_selection(
     base=None,
     n_eff: float | None = None,
     g: float | None = None,
+    margin: float = 0.0,
 ) -> tuple[np.ndarray, list[tuple[int, ...]]]:
     """Backward elimination on each resample of the rows (`resamples`: `(R, n)` integer
     indices, e.g. a moving-block bootstrap). Returns the frequency with which each group
@@ -207,7 +211,7 @@ def stability_selection(
     supports = []
     for idx in resamples:
         w = np.bincount(idx, minlength=n).astype(float)
-        sel = _eliminate(_Gram(X, y, base, w), groups, n_eff - p_b, g)
+        sel = _eliminate(_Gram(X, y, base, w), groups, n_eff - p_b, g, margin)
         supports.append(sel.support)
         counts[list(sel.support)] += 1
     return counts / max(len(resamples), 1), supports

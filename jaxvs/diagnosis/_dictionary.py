@@ -24,6 +24,22 @@ Drive, slot `force` (an additional force on the axis; inputs: velocity `v`, posi
 
 `u − clip(u, ±F)` is the saturation of the inverse-dynamics model: the axis receives
 `clip(u, ±F)`, so the recorded force exceeds what the rigid axis needs by that amount.
+
+Thermal, slot `heat` (an additional heat flow into the bearing node, in kelvin of its
+static temperature rise: it passes through the bearing's lag when the model has one;
+inputs: the speed `s = |v_m|` [rpm] over its top `s_max`, the temperatures `T_c`
+(chassis), `T_a` (air), `T_w` (water) [°C], time `t` [s]):
+
+| kind | what | shape | named effect |
+|---|---|---|---|
+| `(s/smax)^p`, p = 1.5, 2, 3 | friction heat (Palmgren) | – | `speed_nonlinearity` |
+| `T_a-T_c` | a conductance to the air | – | `ambient_temperature` |
+| `T_w-T_c` | a conductance to the water | – | `coolant_temperature` |
+| `(s/smax)·exp(-t/tau)` | friction heat fading as a bearing runs in | `τ` | – |
+| `exp(-t/tau)`, `t`, `t^2` | a heat flow changing with time | `τ` | – |
+
+Thermal, slot `sensor` (an additive term of the bearing sensor, after the lag; input
+time): `exp(-t/tau)` (a thermocouple settling), `t`, `t^2` (a drift).
 """
 
 from __future__ import annotations
@@ -34,7 +50,15 @@ from collections.abc import Callable, Mapping, Sequence
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["DRIVE_NAMED", "Kind", "Member", "drive_force_dictionary"]
+__all__ = [
+    "DRIVE_NAMED",
+    "THERMAL_NAMED",
+    "Kind",
+    "Member",
+    "drive_force_dictionary",
+    "thermal_heat_dictionary",
+    "thermal_sensor_dictionary",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -240,6 +264,91 @@ def drive_force_dictionary(d: Mapping[str, np.ndarray]) -> list[Member]:
         for q in (0.6, 0.7, 0.8, 0.85, 0.9, 0.95, 0.98)
     ]
     return out
+
+
+def _k_speed_power(smax: float, p: float):
+    def cols(d, s, xp=jnp):
+        return _col((d["s"] / smax) ** p)
+
+    return Kind(
+        f"(s/smax)^{p:g}",
+        cols,
+        lambda c, s, x: c[0] * (x["s"] / _num(smax)) ** _sym().nsimplify(p),
+        named="speed_nonlinearity",
+        inputs=("s",),
+    )
+
+
+def _k_tdiff(key: str, sym: str, named: str):
+    return Kind(
+        f"{sym}-T_c",
+        lambda d, s, xp=jnp: _col(d[key] - d["T_chassis"]),
+        lambda c, s, x: c[0] * (x[sym] - x["T_c"]),
+        named=named,
+        inputs=(key, "T_chassis"),
+    )
+
+
+def _k_sexp(smax: float):
+    return Kind(
+        "(s/smax)·exp(-t/tau)",
+        lambda d, s, xp=jnp: _col(d["s"] / smax * xp.exp(-d["t"] / s)),
+        lambda c, s, x: c[0] * x["s"] / _num(smax) * _sym().exp(-x["t"] / _num(s)),
+        shape="tau",
+        unit=" s",
+        inputs=("s", "t"),
+    )
+
+
+def _k_exp():
+    return Kind(
+        "exp(-t/tau)",
+        lambda d, s, xp=jnp: _col(xp.exp(-d["t"] / s)),
+        lambda c, s, x: c[0] * _sym().exp(-x["t"] / _num(s)),
+        shape="tau",
+        unit=" s",
+        inputs=("t",),
+    )
+
+
+THERMAL_NAMED: dict[str, frozenset[str]] = {
+    "speed_nonlinearity": frozenset({"(s/smax)^1.5", "(s/smax)^2", "(s/smax)^3"}),
+    "ambient_temperature": frozenset({"T_a-T_c"}),
+    "coolant_temperature": frozenset({"T_w-T_c"}),
+}
+"""The kinds each named thermal effect is made of (its support in the dictionary)."""
+
+# time constants as fractions of the record: beyond half of it `exp(−t/τ)` is a drift
+# (`t`, `t²` over the record), so longer ones are left to those kinds
+_TAU_FRACTIONS = (0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5)
+
+
+def thermal_sensor_dictionary(d: Mapping[str, np.ndarray]) -> list[Member]:
+    """The thermal sensor slot's dictionary: `exp(−t/τ)` with `τ` as fractions of the
+    record's length (`d["t"]`), `t`, `t²`."""
+    tmax = float(np.max(d["t"]))
+    out = [Member(_k_exp(), tmax * f) for f in _TAU_FRACTIONS]
+    return out + [Member(_k_t()), Member(_k_t2())]
+
+
+def thermal_heat_dictionary(d: Mapping[str, np.ndarray]) -> list[Member]:
+    """The thermal heat-flow slot's dictionary from the calibration data `d` (arrays
+    `s`, `T_chassis`, `T_air`, `T_water`, `t`): speed powers over the top speed (when the
+    speed varies), temperature differences to the chassis (for the temperatures that
+    vary), `(s/s_max)·exp(−t/τ)`, `exp(−t/τ)`, `t`, `t²`."""
+    tmax = float(np.max(d["t"]))
+    smax = float(np.max(np.abs(d["s"])))
+    out: list[Member] = []
+    if smax > 0 and float(np.ptp(d["s"])) > 0:
+        out += [Member(_k_speed_power(smax, p)) for p in (1.5, 2.0, 3.0)]
+        out += [Member(_k_sexp(smax), tmax * f) for f in _TAU_FRACTIONS]
+    for key, sym, named in (
+        ("T_air", "T_a", "ambient_temperature"),
+        ("T_water", "T_w", "coolant_temperature"),
+    ):
+        if float(np.ptp(d[key] - d["T_chassis"])) > 0 and float(np.ptp(d[key])) > 0:
+            out.append(Member(_k_tdiff(key, sym, named)))
+    return out + thermal_sensor_dictionary(d)
 
 
 def nearest_named(

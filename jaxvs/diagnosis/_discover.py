@@ -43,6 +43,7 @@ floor. Discovery asks *where* it enters the model and *what* it is:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -66,7 +67,15 @@ from ..calibration import (
 )
 from ..signal import bspline_basis, difference_penalty, quantile_knots
 from ._base import Experiment, GapModel
-from ._dictionary import DRIVE_NAMED, Member, drive_force_dictionary, nearest_named
+from ._dictionary import (
+    DRIVE_NAMED,
+    THERMAL_NAMED,
+    Member,
+    drive_force_dictionary,
+    nearest_named,
+    thermal_heat_dictionary,
+    thermal_sensor_dictionary,
+)
 from ._stats import (
     block_bootstrap_indices,
     block_length,
@@ -75,13 +84,16 @@ from ._stats import (
     integrated_time,
     nrmse,
 )
+from ._thermal import first_order_lag
 
 __all__ = ["SLOT_FAMILIES", "Discovered", "discover"]
 
 # the families with a discovery slot (the others report that discovery was not run)
-SLOT_FAMILIES = ("drive",)
+SLOT_FAMILIES = ("drive", "thermal")
 
 SLOT_FORCE = "additional force on the axis"
+SLOT_HEAT = "additional heat flow into the bearing node"
+SLOT_SENSOR = "additive term of the bearing sensor"
 
 # slot inputs of the drive's force slot: label -> array key (the product `v·f(t)` is the
 # viscous coefficient varying in time)
@@ -96,6 +108,117 @@ _DRIVE_INPUTS = {
 # force is in it, so a flexible term in `u` gains on any gap (not only an input
 # nonlinearity) and cannot say where the gap enters. It is left out of the additive
 # slot; the input nonlinearity `u → g(u)` is its own slot (`"force"` in `_Basis`).
+
+# slot inputs of the thermal slots: label -> array key. The heat flow enters the bearing
+# node (before its lag, when the model has one); the sensor term is added after it. A heat
+# flow in time alone and a sensor term in time differ only over the bearing's time
+# constant (minutes, against drifts over hours), so time alone is the sensor's input; a
+# heat flow in time enters through the speed (`s·f(t)`: friction heat that changes with
+# time), and the heat-flow dictionary keeps the time kinds beside it.
+_THERMAL_HEAT_INPUTS = {
+    "speed": "s",
+    "chassis temperature": "T_chassis",
+    "air temperature": "T_air",
+    "water temperature": "T_water",
+    "speed·f(time)": "s*t",
+}
+_THERMAL_SENSOR_INPUTS = {"time (sensor)": "t"}
+
+
+@dataclasses.dataclass(frozen=True)
+class _Slots:
+    """A family's discovery slots: the inputs of the flexible term (label -> array key),
+    the slot of each input, the inputs whose term passes through the model's lag, the
+    array keys the slots read, the dictionary of each slot, the named effects' supports
+    and the SymPy symbol of each key."""
+
+    inputs: dict[str, str]
+    slot_of: dict[str, str]
+    lagged: frozenset[str]
+    keys: tuple[str, ...]
+    dictionaries: dict[str, Any]
+    named: dict[str, frozenset[str]]
+    symbols: dict[str, str]
+    axis_labels: dict[str, str]
+    ylabel: str
+    nested: dict[str, str] = dataclasses.field(default_factory=dict)
+
+
+_DRIVE_SLOTS = _Slots(
+    inputs=_DRIVE_INPUTS,
+    slot_of=dict.fromkeys(_DRIVE_INPUTS, SLOT_FORCE),
+    lagged=frozenset(),
+    keys=("v", "q", "a", "u", "t"),
+    dictionaries={SLOT_FORCE: drive_force_dictionary},
+    named=DRIVE_NAMED,
+    symbols={k: k for k in ("v", "q", "a", "u", "t")},
+    axis_labels={
+        "v": "velocity [m/s]",
+        "q": "position [m]",
+        "a": "acceleration [m/s²]",
+        "t": "time [s]",
+        "v*t": "time [s]",
+    },
+    ylabel="additional force [N]",
+)
+
+
+def _thermal_slots(cal: Sequence[Experiment], lag: Any) -> _Slots:
+    """The thermal slots on the calibration data (the inputs that vary); the heat flow's
+    columns pass through the model's lag when it has one."""
+
+    def varies(key):
+        src = "s" if key == "s*t" else key
+        x = np.concatenate([np.asarray(e.arrays[src], float) for e in cal])
+        return float(np.ptp(x)) > 0
+
+    heat = {lab: k for lab, k in _THERMAL_HEAT_INPUTS.items() if varies(k)}
+    inputs = {**heat, **_THERMAL_SENSOR_INPUTS}
+    slot_of = {lab: SLOT_HEAT for lab in heat} | dict.fromkeys(_THERMAL_SENSOR_INPUTS, SLOT_SENSOR)
+    return _Slots(
+        inputs=inputs,
+        slot_of=slot_of,
+        lagged=frozenset(heat) if lag is not None else frozenset(),
+        keys=("s", "T_chassis", "T_air", "T_water", "t"),
+        dictionaries={SLOT_HEAT: thermal_heat_dictionary, SLOT_SENSOR: thermal_sensor_dictionary},
+        named=THERMAL_NAMED,
+        symbols={"s": "s", "T_chassis": "T_c", "T_air": "T_a", "T_water": "T_w", "t": "t"},
+        axis_labels={
+            "s": "speed |v_m| [rpm]",
+            "T_chassis": "chassis temperature [°C]",
+            "T_air": "air temperature [°C]",
+            "T_water": "water temperature [°C]",
+            "t": "time [s]",
+            "s*t": "time [s]",
+        },
+        ylabel="additional bearing temperature [K]",
+        # a heat flow in speed and time holds the sensor's term in time beside it
+        nested={"speed·f(time)": "time (sensor)"},
+    )
+
+
+def _dynamics(model: GapModel):
+    """The bearing's lag of a (unwrapped) thermal model, or `None`."""
+    for e in model.effects:
+        if e.name == "dynamics":
+            return e
+    return None
+
+
+def _lag(x, dyn):
+    """A heat flow's share of the bearing temperature through the model's lag `dyn`
+    (linear: the lag of the sum is the model's lag plus this, started from zero)."""
+    return first_order_lag(x, jnp.asarray(dyn.tau), dyn.dt, jnp.zeros((), x.dtype))
+
+
+@functools.partial(jax.jit, static_argnums=2)
+def _lag_columns(x, tau, dt):
+    """`_lag` of every column of `(exp, n, k)` at the time constant `tau` [s]."""
+
+    def one(col):
+        return first_order_lag(col, tau, dt, jnp.zeros((), col.dtype))
+
+    return jax.vmap(jax.vmap(one, 1, 1))(x)
 
 
 @dataclasses.dataclass
@@ -172,12 +295,16 @@ class Discovered:
 # ------------------------------------------------------------------------------ data
 
 
-def _slot_experiment(e: Experiment) -> Experiment:
-    """The experiment with the slot inputs the drive's model does not read: `t` [s] and
-    the recorded force `u` (the target)."""
+def _slot_experiment(e: Experiment, family: str = "drive") -> Experiment:
+    """The experiment with the slot inputs the family's model does not read: time `t` [s]
+    (the record's own), and for the drive the recorded force `u` (the target), for
+    the thermal family the speed `s = |v_m|`."""
     arrays = dict(e.arrays)
     arrays["t"] = np.asarray(e.t, float)
-    arrays["u"] = np.asarray(e.arrays["y"], float)
+    if family == "thermal":
+        arrays["s"] = np.abs(np.asarray(e.arrays["v_m"], float))
+    else:
+        arrays["u"] = np.asarray(e.arrays["y"], float)
     return dataclasses.replace(e, arrays=arrays)
 
 
@@ -201,14 +328,21 @@ class _Basis:
     """The flexible term's basis: cubic B-splines per slot input on quantile knots of the
     calibration data, and its penalty (P-spline second differences plus a small ridge)."""
 
-    def __init__(self, cal: Sequence[Experiment], inputs: Mapping[str, str], n_basis: int):
+    def __init__(
+        self,
+        cal: Sequence[Experiment],
+        inputs: Mapping[str, str],
+        n_basis: int,
+        keys: Sequence[str] = ("v", "q", "a", "u", "t"),
+    ):
         self.inputs = dict(inputs)
+        self.keys = tuple(keys)
         self.compiled = None  # the basis on stacked experiments, compiled once
         self.knots: dict[str, np.ndarray] = {}
         self.blocks: dict[str, slice] = {}
         k0 = 0
         for label, key in self.inputs.items():
-            src = "t" if key == "v*t" else key
+            src = "t" if key in ("v*t", "s*t") else key
             x = np.concatenate([np.asarray(e.arrays[src], float) for e in cal])
             if key == "u":
                 # the recorded force is the target: a term in it may not contain the
@@ -218,7 +352,8 @@ class _Basis:
                 k = 2 * self.knots[label].size
             else:
                 # a ripple of many periods over the travel needs many knots in position
-                nb = {"v*t": max(4, n_basis - 2), "q": 3 * n_basis}.get(key, n_basis)
+                nb = {"v*t": max(4, n_basis - 2), "s*t": max(4, n_basis - 2), "q": 3 * n_basis}
+                nb = nb.get(key, n_basis)
                 self.knots[label] = quantile_knots(x, nb)
                 k = self.knots[label].size - 4
             self.blocks[label] = slice(k0, k0 + k)
@@ -228,8 +363,8 @@ class _Basis:
     def __call__(self, d: Mapping[str, Any]) -> jnp.ndarray:
         cols = []
         for label, key in self.inputs.items():
-            if key == "v*t":
-                b = jnp.asarray(d["v"])[:, None] * bspline_basis(d["t"], self.knots[label])
+            if key in ("v*t", "s*t"):
+                b = jnp.asarray(d[key[0]])[:, None] * bspline_basis(d["t"], self.knots[label])
             elif key == "u":
                 u = jnp.asarray(d["u"])[:, None]
                 lv = jnp.asarray(self.knots[label])[None, :]
@@ -252,11 +387,16 @@ class _Basis:
         rows.append(math.sqrt(ridge * n / self.size) * np.eye(self.size))
         return np.concatenate(rows)
 
-    def masks(self) -> tuple[list[str], np.ndarray]:
+    def masks(self, nested: Mapping[str, str] | None = None) -> tuple[list[str], np.ndarray]:
+        """One mask per input, one with all, one with none; `nested` maps an input to a
+        simpler one whose block its mask includes (the product `s·f(t)` with `f(t)`)."""
         labels = list(self.inputs) + ["all"]
         m = np.zeros((len(labels) + 1, self.size))  # the last row: no flexible term
         for i, label in enumerate(self.inputs):
             m[i, self.blocks[label]] = 1.0
+            inner = (nested or {}).get(label)
+            if inner in self.blocks:
+                m[i, self.blocks[inner]] = 1.0
         m[len(self.inputs)] = 1.0
         return labels, m
 
@@ -321,8 +461,10 @@ def _fit_flexible(params, static, inputs, y, wfit, phi, pen, masks, max_steps):
     return jax.vmap(one)(masks)
 
 
-def _flexible_step(model, exps, n_cal, basis, scale, masks, pen, max_steps=40):
-    """Fit every mask on one data set; returns (thetas, predictions (masks, exp, n))."""
+def _flexible_step(model, exps, n_cal, basis, scale, masks, pen, lagged=(), max_steps=40):
+    """Fit every mask on one data set; returns (thetas, predictions (masks, exp, n)).
+    The columns of the inputs `lagged` pass through the model's lag at its calibrated
+    time constant (held there: the basis stays linear and known)."""
     keys = set(exps[0].arrays)
     st = _stack(exps, sorted(keys))
     w = np.zeros((len(exps), st["y"].shape[1]))
@@ -331,6 +473,10 @@ def _flexible_step(model, exps, n_cal, basis, scale, masks, pen, max_steps=40):
             w[i, : e.n] = scale
     inputs = {k: jnp.asarray(v) for k, v in st.items()}
     phi = _basis_values(basis, inputs)
+    dyn = _dynamics(unwrap(model))
+    if lagged and dyn is not None:
+        cols = np.concatenate([np.arange(basis.size)[basis.blocks[lab]] for lab in lagged])
+        phi = phi.at[..., cols].set(_lag_columns(phi[..., cols], jnp.asarray(dyn.tau), dyn.dt))
     flat, unravel, static = _split(model)
     params = unravel(flat)
     thetas, preds, _ = _fit_flexible(
@@ -349,10 +495,9 @@ def _flexible_step(model, exps, n_cal, basis, scale, masks, pen, max_steps=40):
 
 def _basis_values(basis, inputs):
     """The flexible basis on stacked experiments `(e, n, K)`, in one compiled call."""
-    keys = ("v", "q", "a", "u", "t")
     if basis.compiled is None:
         basis.compiled = jax.jit(jax.vmap(basis))
-    return basis.compiled({k: inputs[k] for k in keys})
+    return basis.compiled({k: inputs[k] for k in basis.keys})
 
 
 def _residuals(exps, pred):
@@ -395,18 +540,27 @@ def _fit_formula(params, static, inputs, y, wfit, coefs0, logs0, lo, hi, fns, ma
     flat, unravel = ravel_pytree(params)
     p, k = flat.size, coefs0.size
 
-    def formula(c, logs, d):
-        out, i = 0.0, 0
-        for j, (fn, ncol, _) in enumerate(fns):
-            cols = fn(d, jnp.exp(logs[j]))
-            out = out + cols @ c[i : i + ncol]
+    def formula(c, logs, d, dyn):
+        # terms of a heat flow (flag `lagged`) pass through the model's lag `dyn`
+        out, heat, i = 0.0, 0.0, 0
+        for j, (fn, ncol, _, lagged) in enumerate(fns):
+            term = fn(d, jnp.exp(logs[j])) @ c[i : i + ncol]
+            if lagged:
+                heat = heat + term
+            else:
+                out = out + term
             i += ncol
+        if dyn is not None and any(f[3] for f in fns):
+            out = out + _lag(heat, dyn)
+        else:
+            out = out + heat
         return out
 
     def predict(theta):
         m = unwrap(eqx.combine(unravel(theta[:p]), static))
         c, logs = theta[p : p + k], theta[p + k :]
-        return jax.vmap(lambda d: m(d) + formula(c, logs, d))(inputs)
+        dyn = _dynamics(m)
+        return jax.vmap(lambda d: m(d) + formula(c, logs, d, dyn))(inputs)
 
     # the log shape of a shapeless kind is carried with a zero Jacobian: LM leaves it
     def resid(theta, args):
@@ -441,6 +595,7 @@ def discover(
     stability: float = 0.8,
     min_shrink: float = 0.05,
     min_share: float = 0.8,
+    min_evidence: float = 5.0,
     n_basis: int = 8,
     seed: int = 0,
     progress: Any = None,
@@ -464,6 +619,9 @@ def discover(
     - `min_shrink`: the flexible term must remove at least this share of the held-out gap.
     - `min_share`: the formula must remove at least this share of what the flexible
         term removes to be *found*.
+    - `min_evidence`: a term stays in the formula only when it raises the log evidence
+        by more than this (default 5: a Bayes factor of e⁵, about the ΔBIC of 10 that
+        named effects pass).
     - `n_basis`: B-splines per slot input (cubic, default 8).
     - `seed`: seed of the null records and the resamples.
     - `progress`: optional `callable(str)` told what runs.
@@ -505,28 +663,32 @@ def discover(
     if fam.name not in SLOT_FAMILIES:
         raise ValueError(
             f"discover: the {fam.name!r} family has no discovery slot yet; the drive family "
-            "has the slot 'additional force on the axis'."
+            "has the slot 'additional force on the axis', the thermal family 'additional "
+            "heat flow into the bearing node' and 'additive term of the bearing sensor'."
         )
     if not (isinstance(n_null, int) and n_null >= 0):
         raise ValueError(f"discover: n_null must be an integer >= 0; got {n_null!r}.")
     if not 0 < stability <= 1:
         raise ValueError(f"discover: stability must lie in (0, 1]; got {stability!r}.")
     rng = np.random.default_rng(seed)
-    cal = [_slot_experiment(e) for e in calibration]
-    val = [_slot_experiment(e) for e in validation]
+    cal = [_slot_experiment(e, fam.name) for e in calibration]
+    val = [_slot_experiment(e, fam.name) for e in validation]
     exps = cal + val
     n_cal = len(cal)
     y_cal = np.concatenate([e.y for e in cal])
     scale = 1.0 / max(float(np.sqrt(np.mean(y_cal**2))), 1e-300)
     n_samples = int(sum(e.n for e in cal))
 
-    basis = _Basis(cal, _DRIVE_INPUTS, n_basis)
+    dyn = _dynamics(unwrap(model))
+    slots = _DRIVE_SLOTS if fam.name == "drive" else _thermal_slots(cal, dyn)
+    basis = _Basis(cal, slots.inputs, n_basis, slots.keys)
     pen = basis.penalty(n_samples, lam=1e-3, ridge=1e-7) * scale
-    labels, masks = basis.masks()
+    labels, masks = basis.masks(slots.nested)
+    lagged = tuple(lab for lab in slots.inputs if lab in slots.lagged)
 
     # 1. the flexible term on the records
     say("discovery: the flexible term, input by input")
-    thetas, preds, p_model, _ = _flexible_step(model, exps, n_cal, basis, scale, masks, pen)
+    thetas, preds, p_model, _ = _flexible_step(model, exps, n_cal, basis, scale, masks, pen, lagged)
     red = _val_reductions(exps, n_cal, preds)
     y_val = np.concatenate([e.y for e in val])
     e0 = np.concatenate(_residuals(exps, preds[-1])[n_cal:])
@@ -545,17 +707,30 @@ def discover(
         }
     singles = labels[:-1]
     best = max(singles, key=lambda lab: inputs[lab]["reduction"])
+    inner = slots.nested.get(best)
+    if inner in inputs:
+        # a term that contains a simpler one (`s·f(t)` contains `f(t)`) wins only when
+        # it removes more than the simpler one alone, by a held-out interval above zero
+        e_in = np.concatenate(_residuals(exps, preds[labels.index(inner)])[n_cal:])
+        e_best = np.concatenate(_residuals(exps, preds[labels.index(best)])[n_cal:])
+        _, _, _, d_nest, _ = gap_change_interval(
+            e_in, e_best, y_val, length=blen, n_boot=n_boot, seed=seed
+        )
+        if not d_nest[0] > 0:
+            best = inner
     ib = labels.index(best)
 
     # 2. the null: the same step on effect-free records
     null_red: list[float] = []
     if n_null:
         say(f"discovery: the same step on {n_null} effect-free records")
-        nom = GapModel(unwrap(model).nominal)
+        # the drive's null: the nominal axis in the recorded loop; the thermal null: the
+        # model as calibrated (its lag included) on the records' own inputs
+        nom = GapModel(unwrap(model).nominal) if fam.name == "drive" else model
         sets = fam.null_experiments(nom, list(calibration) + list(validation), rng, n_null)
         for s in sets:
-            s = [_slot_experiment(e) for e in s]
-            _, p_null, _, _ = _flexible_step(nom, s, n_cal, basis, scale, masks, pen)
+            s = [_slot_experiment(e, fam.name) for e in s]
+            _, p_null, _, _ = _flexible_step(nom, s, n_cal, basis, scale, masks, pen, lagged)
             null_red.append(float(np.max(_val_reductions(s, n_cal, p_null)[:-1])))
     thr = float(np.quantile(null_red, 0.95)) if null_red else 0.0
     fb = inputs[best]
@@ -567,7 +742,7 @@ def discover(
         "null_reductions": null_red,
     }
     out = Discovered(
-        slot=SLOT_FORCE,
+        slot=slots.slot_of[best],
         fired=bool(fired),
         input=best if fired else None,
         inputs=inputs,
@@ -593,11 +768,12 @@ def discover(
 
     # 3. the formula
     say("discovery: the formula (evidence elimination, stability selection)")
-    cal_d = {
-        k: np.concatenate([np.asarray(e.arrays[k], float) for e in cal])
-        for k in ("v", "q", "a", "u", "t")
-    }
-    members = drive_force_dictionary(cal_d)
+    cal_d = {k: np.concatenate([np.asarray(e.arrays[k], float) for e in cal]) for k in slots.keys}
+    slot = slots.slot_of[best]
+    members = slots.dictionaries[slot](cal_d)
+    # a heat flow's terms pass through the model's lag (at its calibrated time constant
+    # for the selection; with it free in the recalibration)
+    through_lag = slot == SLOT_HEAT and dyn is not None
     # each shape stays within a factor 3 of its grid (a shape that runs away turns its
     # term into another kind: a Stribeck speed at infinity is a sign law)
     bounds: dict[str, tuple[float, float]] = {}
@@ -605,13 +781,24 @@ def discover(
         if m.shape is not None:
             lo_, hi_ = bounds.get(m.kind.name, (np.inf, -np.inf))
             bounds[m.kind.name] = (min(lo_, m.shape), max(hi_, m.shape))
-    if best != "force":
+    if fam.name == "thermal":
+        # the formula is made of the winning input's variables (the chassis temperature,
+        # an input of the model, may join them): the gap lives there, and the thermal
+        # inputs drift together over hours, so a term in another of them would stand in
+        # for it
+        src = {"s*t": ("s", "t")}.get(slots.inputs[best], (slots.inputs[best],))
+        members = [m for m in members if set(m.kind.inputs) <= set(src) | {"T_chassis"}]
+    if fam.name == "drive" and best != "force":
         # the recorded force is the target: a term in it enters the formula only when
         # the flexible term says the gap lives there (else it stands in for any term
         # correlated with the force, the noise included)
         members = [m for m in members if "u" not in m.kind.inputs]
-    X = [m.evaluate(cal_d) for m in members]
     flat0 = thetas[-1][:p_model]
+    if through_lag:
+        # the lag at the time constant of the model recalibrated beside the flexible terms
+        _, unravel0, static0 = _split(model)
+        dyn = _dynamics(unwrap(eqx.combine(unravel0(jnp.asarray(flat0)), static0)))
+    X = [_member_columns(m, cal, dyn if through_lag else None) for m in members]
     r_cal = np.concatenate(_residuals(exps, preds[-1])[:n_cal])
     B = _base_jacobian(model, flat0, cal)
     chosen = _screen(members, X, B, r_cal, keep=2)
@@ -631,9 +818,11 @@ def discover(
     rows = slice(None, None, stride)
     Xs, rs, Bs, r_fs = Xm[rows], r_cal[rows], B[rows], r_flex[rows]
     n_eff = effective_samples(r_fs)
-    full = backward_elimination(Xs, rs, groups, base=Bs, n_eff=n_eff)
+    full = backward_elimination(Xs, rs, groups, base=Bs, n_eff=n_eff, margin=min_evidence)
     idx = block_bootstrap_indices(rs.size, block_length(r_fs), n_stability, rng)
-    _, supports = stability_selection(Xs, rs, groups, resamples=idx, base=Bs, n_eff=n_eff)
+    _, supports = stability_selection(
+        Xs, rs, groups, resamples=idx, base=Bs, n_eff=n_eff, margin=min_evidence
+    )
     kinds = sorted({m.kind.name for m in members})
     freq = {
         k: float(np.mean([any(members[j].kind.name == k for j in s) for s in supports]))
@@ -658,7 +847,9 @@ def discover(
     out.frequencies = freq
 
     # flexible term's shape over its input (for the figure)
-    out.shape = _shape(exps, n_cal, basis, thetas[ib], p_model, best, preds[-1])
+    out.shape = _shape(
+        exps, n_cal, basis, thetas[ib], p_model, best, preds[-1], slots, pred_flex=preds[ib]
+    )
     if not final_members:
         for k in ("_keep", "_v", "_step"):
             out.shape.pop(k)
@@ -681,16 +872,17 @@ def discover(
         c0 = np.linalg.lstsq(A, rs, rcond=None)[0][Bs.shape[1] :]
     logs0 = np.log([m.shape if m.shape is not None else 1.0 for m in fm])
     say("discovery: recalibrating the formula")
-    med_u = float(np.median(np.abs(cal_d["u"])))
+    med_u = float(np.median(np.abs(cal_d["u"]))) if "u" in cal_d else 0.0
     lo = np.array(
         [np.log(bounds[m.kind.name][0] / 3) if m.shape is not None else -np.inf for m in fm]
     )
     hi = np.array(
         [np.log(bounds[m.kind.name][1] * 3) if m.shape is not None else np.inf for m in fm]
     )
-    lo = np.where([m.kind.shape == "F" for m in fm], np.log(med_u), lo)  # a limit, not u
+    if med_u > 0:
+        lo = np.where([m.kind.shape == "F" for m in fm], np.log(med_u), lo)  # a limit, not u
     logs0 = np.clip(logs0, lo + 1e-9, hi - 1e-9)
-    fit = _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi)
+    fit = _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi, through_lag)
     theta, pred_f, jtj, r_w = fit
     p = p_model
     k = int(sum(m.kind.k for m in fm))
@@ -709,7 +901,7 @@ def discover(
     cov = _covariance(jtj, r_w, free, n_samples, r_cal_f)
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     terms, i = [], p
-    sym_x = _symbols()
+    sym_x = _symbols(slots.symbols)
     expr = 0
     for j, m in enumerate(fm):
         c = theta[i : i + m.kind.k]
@@ -744,7 +936,7 @@ def discover(
     out.shrink, out.shrink_interval = float(sh_f), (float(s_f[0]), float(s_f[1]))
     out.reduction, out.reduction_interval = float(red_f), (float(d_f[0]), float(d_f[1]))
     out.share = float(share)
-    out.nearest_effect, out.named_instead = nearest_named([m.kind.name for m in fm], DRIVE_NAMED)
+    out.nearest_effect, out.named_instead = nearest_named([m.kind.name for m in fm], slots.named)
     ok = d_f[0] > 0 and red_f > thr and share >= min_share
     out.found = bool(ok)
     out.shape["formula"] = _formula_on(exps, n_cal, pred_f, preds[-1], out.shape)
@@ -772,10 +964,23 @@ def _num4(x) -> float:
     return float(f"{float(x):.4g}")
 
 
-def _symbols():
+def _symbols(names: Mapping[str, str]):
+    """SymPy symbols of the slot inputs: array key -> symbol (printed by its name)."""
     import sympy as sp
 
-    return {n: sp.Symbol(n, real=True) for n in ("v", "q", "a", "u", "t")}
+    return {n: sp.Symbol(n, real=True) for n in names.values()}
+
+
+def _member_columns(m: Member, cal: Sequence[Experiment], dyn) -> np.ndarray:
+    """A member's columns on the calibration samples, through the lag `dyn` (per
+    experiment, from zero) when it is not `None`."""
+    cols = []
+    for e in cal:
+        x = m.evaluate(e.arrays)
+        if dyn is not None:
+            x = np.asarray(_lag_columns(jnp.asarray(x)[None], jnp.asarray(dyn.tau), dyn.dt))[0]
+        cols.append(x)
+    return np.concatenate(cols)
 
 
 def _base_jacobian(model, flat, cal) -> np.ndarray:
@@ -790,13 +995,13 @@ def _base_jacobian(model, flat, cal) -> np.ndarray:
     return np.concatenate([np.asarray(jac(jnp.asarray(flat), e.jax_arrays())) for e in cal])
 
 
-def _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi):
+def _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi, through_lag=False):
     _, unravel, static = _split(model)
     st = _stack(exps, sorted(exps[0].arrays))
     w = np.zeros((len(exps), st["y"].shape[1]))
     for i, e in enumerate(exps[:n_cal]):
         w[i, : e.n] = scale
-    fns = tuple((m.kind.columns, m.kind.k, m.shape is not None) for m in fm)
+    fns = tuple((m.kind.columns, m.kind.k, m.shape is not None, through_lag) for m in fm)
     theta, pred, jtj, r_w = _fit_formula(
         unravel(jnp.asarray(flat0)),
         static,
@@ -826,39 +1031,49 @@ def _covariance(jtj, r_w, free, n, residual) -> np.ndarray:
     return cov
 
 
-def _shape(exps, n_cal, basis, theta, p, label, pred0) -> dict[str, Any]:
+def _shape(
+    exps, n_cal, basis, theta, p, label, pred0, slots=_DRIVE_SLOTS, pred_flex=None
+) -> dict[str, Any]:
     """The flexible term of input `label` over its input, on the calibration samples:
     `x`, the term `flexible`, the partial residual `partial` (the residual without the
-    flexible term). For the term `v·f(t)` the figure is the viscous coefficient `f(t)`
-    over time (term and residual divided by `v` where the speed is above 30 % of its top)."""
+    flexible term). The term drawn is its net contribution, `pred_flex − pred0` (what the
+    model with the term predicts beyond the model recalibrated without it: a part of the
+    term the model's own parameters take up, such as a linear speed term a viscous
+    coefficient absorbs, is not drawn), as the formula's is.
+    For the term `v·f(t)` the figure is the viscous coefficient `f(t)`
+    over time (term and residual divided by `v` where the speed is above 30 % of its top),
+    likewise `s·f(t)` of the thermal heat flow. A heat flow's term is drawn before the lag
+    (the bearing's static temperature rise)."""
     key = basis.inputs[label]
     c = np.asarray(theta[p:])
     sl = basis.blocks[label]
     xs, fl, pr, vs = [], [], [], []
     for i, e in enumerate(exps[:n_cal]):
-        d = {k: jnp.asarray(e.arrays[k])[None] for k in ("v", "q", "a", "u", "t")}
+        d = {k: jnp.asarray(e.arrays[k])[None] for k in basis.keys}
         phi = np.asarray(_basis_values(basis, d))[0]
-        xs.append(np.asarray(e.arrays["t" if key == "v*t" else key]))
-        fl.append(phi[:, sl] @ c[sl])
+        xs.append(np.asarray(e.arrays["t" if key in ("v*t", "s*t") else key]))
+        if pred_flex is None or key in ("v*t", "s*t"):
+            fl.append(phi[:, sl] @ c[sl])
+        else:
+            fl.append(pred_flex[i, : e.n] - pred0[i, : e.n])
         pr.append(e.y - pred0[i, : e.n])
-        vs.append(np.asarray(e.arrays["v"]))
+        vs.append(np.asarray(e.arrays["s" if key == "s*t" else slots.keys[0]]))
     x, f, r, v = (np.concatenate(z) for z in (xs, fl, pr, vs))
-    per_v = key == "v*t"
+    per_v = key in ("v*t", "s*t")
     keep = np.abs(v) > 0.3 * np.max(np.abs(v)) if per_v else np.ones(x.size, bool)
     if per_v:
         f, r = f / np.where(keep, v, 1.0), r / np.where(keep, v, 1.0)
     x, f, r = x[keep], f[keep], r[keep]
     step = max(1, x.size // 3000)
-    names = {
-        "v": "velocity [m/s]",
-        "q": "position [m]",
-        "a": "acceleration [m/s²]",
-        "t": "time [s]",
-        "v*t": "time [s]",
-    }
+    if key == "s*t":
+        ylabel = "heat flow per unit speed f(t) [K/rpm]"
+    elif per_v:
+        ylabel = "viscous coefficient f(t) [N·s/m]"
+    else:
+        ylabel = slots.ylabel
     return {
-        "label": names[key],
-        "ylabel": "viscous coefficient f(t) [N·s/m]" if per_v else "additional force [N]",
+        "label": slots.axis_labels[key],
+        "ylabel": ylabel,
         "input": label,
         "x": x[::step],
         "flexible": f[::step],
@@ -874,6 +1089,6 @@ def _formula_on(exps, n_cal, pred_f, pred0, shape) -> np.ndarray:
     the fit without it), divided by `v` where the figure shows `f(t)`."""
     d = np.concatenate([pred_f[i, : e.n] - pred0[i, : e.n] for i, e in enumerate(exps[:n_cal])])
     keep, v = shape.pop("_keep"), shape.pop("_v")
-    if shape["ylabel"].startswith("viscous"):
+    if shape["ylabel"].startswith(("viscous", "heat flow per")):
         d = d / np.where(keep, v, 1.0)
     return d[keep][:: shape.pop("_step")]

@@ -31,7 +31,14 @@ def plot_discovered(discovered, ax=None):
     part = np.asarray(shape["partial"])
     # the partial residual: the flexible term plus what it leaves
     ax.plot(x, part - np.mean(part) + np.mean(flex), ".", ms=1.5, color="0.7", label="residual")
-    ax.plot(x[order], flex[order], "-", color="k", lw=1.8, label="flexible term")
+    # the term's net contribution depends a little on the other inputs too: its mean
+    # over bins of the input, as a line
+    edges = np.unique(np.quantile(x, np.linspace(0, 1, 61)))
+    which = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, max(edges.size - 2, 0))
+    xb = np.array([x[which == b].mean() for b in np.unique(which)])
+    fb = np.array([flex[which == b].mean() for b in np.unique(which)])
+    ax.plot(x[order], flex[order], ".", ms=1, color="0.35", alpha=0.3)
+    ax.plot(xb, fb, "-", color="k", lw=1.8, label="flexible term")
     if "formula" in shape and discovered.formula is not None:
         f = np.asarray(shape["formula"])
         f = f - np.mean(f) + np.mean(flex)
