@@ -38,6 +38,15 @@ floor. Discovery asks *where* it enters the model and *what* it is:
    named library effect (only `sign(v)`: Coulomb friction), that named effect is
    reported instead. Otherwise "no formula found", and the flexible term's shape is
    the answer ([`plot_discovered`][jaxvs.plotting.plot_discovered] draws it).
+
+The thermal family has two slots: an additional heat flow into the bearing node (in
+kelvin of the bearing's static temperature rise; inputs speed `s = |v_m|`, the measured
+temperatures, and `s·f(t)`), which passes through the model's bearing lag when it has
+one (the flexible basis at the calibrated time constant, the formula with it free), and
+an additive term of the bearing sensor in time (after the lag). `s·f(t)` holds the
+sensor's `f(t)` beside it and wins over it only by a held-out interval above zero. Its
+formula is built from the variables of the winning input (`_dictionary`). The thermal
+null is the calibrated model (its lag included) on the records' own inputs.
 """
 
 from __future__ import annotations
@@ -609,7 +618,8 @@ def discover(
         `jaxvs.diagnose` (its final model and experiments are used), or a calibrated
         `GapModel`, with `calibration` and `validation` its prepared experiments (held
         out: the validation experiments are never fitted).
-    - `family`: the family name (`"drive"`) or instance; taken from the report.
+    - `family`: the family name (`"drive"`, `"thermal"`) or instance; taken from the
+        report.
     - `n_null`: effect-free records the discovery step is run on (the null that pays
         for the choice of the input; default 19: the 95th percentile is about their
         largest); `0` skips the null (threshold 0; for tests of the formula only).
@@ -1042,8 +1052,7 @@ def _shape(
     coefficient absorbs, is not drawn), as the formula's is.
     For the term `v·f(t)` the figure is the viscous coefficient `f(t)`
     over time (term and residual divided by `v` where the speed is above 30 % of its top),
-    likewise `s·f(t)` of the thermal heat flow. A heat flow's term is drawn before the lag
-    (the bearing's static temperature rise)."""
+    likewise `s·f(t)` of the thermal heat flow (drawn before the lag)."""
     key = basis.inputs[label]
     c = np.asarray(theta[p:])
     sl = basis.blocks[label]
