@@ -234,7 +234,9 @@ def _lag_columns(x, tau, dt):
 class Discovered:
     """What discovery found in one slot (see the module doc for the method).
 
-    - `slot`: the physical place (`"additional force on the axis"`).
+    - `slot`: the physical place (drive: `"additional force on the axis"`; thermal:
+        `"additional heat flow into the bearing node"` or `"additive term of the bearing
+        sensor"`).
     - `fired`: whether the flexible term beat the null (nothing else is meaningful when not).
     - `input`: the slot input whose flexible term alone removes most of the held-out gap.
     - `inputs`: per input (and `"all"`), the flexible term's held-out `reduction`,
