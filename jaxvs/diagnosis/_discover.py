@@ -894,7 +894,7 @@ def discover(
     if med_u > 0:
         lo = np.where([m.kind.shape == "F" for m in fm], np.log(med_u), lo)  # a limit, not u
     logs0 = np.clip(logs0, lo + 1e-9, hi - 1e-9)
-    fit = _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi, through_lag)
+    fit = _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, (lo, hi), through_lag)
     theta, pred_f, jtj, r_w = fit
     p = p_model
     k = int(sum(m.kind.k for m in fm))
@@ -1007,7 +1007,8 @@ def _base_jacobian(model, flat, cal) -> np.ndarray:
     return np.concatenate([np.asarray(jac(jnp.asarray(flat), e.jax_arrays())) for e in cal])
 
 
-def _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi, through_lag=False):
+def _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, bounds, through_lag=False):
+    lo, hi = bounds
     _, unravel, static = _split(model)
     st = _stack(exps, sorted(exps[0].arrays))
     w = np.zeros((len(exps), st["y"].shape[1]))
