@@ -20,6 +20,11 @@ compilation cache: what a user waits for the first time), which reports
   two labelled runs (`--label before`, `--label after`) are compared value by value.
 
     python benchmarks/diagnosis_speed.py [--label after] [--repeat 1] [--profile]
+    python benchmarks/diagnosis_speed.py --label "warm cache" --repeat 2 --cache /tmp/xla
+
+With `--cache`, the runs share a persistent compilation cache, as the `jaxvs` command
+does: the first run fills it (cold), the next ones read it (what a user waits the second
+time the same command runs on records of the same size).
 
 Writes benchmarks/results/diagnosis_speed.json and .md (runs under other labels kept).
 `--profile` also writes a cProfile listing of one run (benchmarks/results/
@@ -167,6 +172,8 @@ def child(args) -> dict:
 
     import jaxvs
 
+    if args.cache:  # what the `jaxvs` command does for itself
+        jaxvs.enable_compilation_cache(args.cache)
     case = next(c for c in blind_plants.cases() if c.name == args.case)
     case = dataclasses.replace(case, settings={**case.settings, "n_cal": N_CAL, "n_val": N_VAL})
     cal, val, _ = blind_plants.generate(case)
@@ -307,14 +314,15 @@ def write(results: dict) -> None:
         "",
         "Reproduce: `python benchmarks/diagnosis_speed.py --label after`.",
         "",
-        "| label | date | commit | CPU [s] | wall [s] | load average (1 min, before → after) | "
-        "XLA compile [s] (compilations) |",
-        "|---|---|---|---|---|---|---|",
+        "| label | date | commit | persistent cache | CPU [s] | wall [s] | load average (1 min, "
+        "before → after) | XLA compile [s] (compilations) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for label, entry in results["runs"].items():
         for run in entry["runs"]:
             lines.append(
-                f"| {label} | {entry['date']} | {entry['commit']} | {run['cpu_seconds']:.1f} | "
+                f"| {label} | {entry['date']} | {entry['commit']} | "
+                f"{run.get('compilation_cache', 'none')} | {run['cpu_seconds']:.1f} | "
                 f"{run['wall_seconds']:.1f} | {run['load_average_before'][0]:.2f} → "
                 f"{run['load_average_after'][0]:.2f} | {run['compile_seconds']:.1f} "
                 f"({run['compiles']}) |"
@@ -363,6 +371,12 @@ def main() -> None:
     p.add_argument("--repeat", type=int, default=1, help="fresh processes to measure")
     p.add_argument("--profile", action="store_true", help="cProfile one run")
     p.add_argument("--commit", default=None, help="commit measured (default: HEAD)")
+    p.add_argument(
+        "--cache",
+        default=None,
+        help="persistent compilation cache folder (as the jaxvs command uses); the first "
+        "run fills it, later runs read it",
+    )
     p.add_argument("--case", default=CASE, help=argparse.SUPPRESS)
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args()
@@ -371,19 +385,28 @@ def main() -> None:
         return
     path = RESULTS / "diagnosis_speed.json"
     results = json.loads(path.read_text()) if path.exists() else {"runs": {}}
-    commit = args.commit or subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=HERE
-    ).stdout.strip()
+    commit = (
+        args.commit
+        or subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=HERE
+        ).stdout.strip()
+    )
     runs = []
     for _ in range(args.repeat):
         cmd = [sys.executable, __file__, "--child", "--case", args.case]
+        if args.cache:
+            cmd += ["--cache", args.cache]
         if args.profile:
             cmd.append("--profile")
+        cached = bool(args.cache) and any(pathlib.Path(args.cache).glob("*"))
         proc = subprocess.run(cmd, capture_output=True, text=True)
         line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")]
         if proc.returncode or not line:
             sys.exit(f"the measurement failed:\n{proc.stderr[-4000:]}")
         run = json.loads(line[-1][7:])
+        run["compilation_cache"] = (
+            "none" if not args.cache else ("read (warm)" if cached else "filled (cold)")
+        )
         runs.append(run)
         print(
             f"{args.label}: CPU {run['cpu_seconds']:.1f} s, wall {run['wall_seconds']:.1f} s, "

@@ -38,6 +38,15 @@ floor. Discovery asks *where* it enters the model and *what* it is:
    named library effect (only `sign(v)`: Coulomb friction), that named effect is
    reported instead. Otherwise "no formula found", and the flexible term's shape is
    the answer ([`plot_discovered`][jaxvs.plotting.plot_discovered] draws it).
+
+The thermal family has two slots: an additional heat flow into the bearing node (in
+kelvin of the bearing's static temperature rise; inputs speed `s = |v_m|`, the measured
+temperatures, and `s·f(t)`), which passes through the model's bearing lag when it has
+one (the flexible basis at the calibrated time constant, the formula with it free), and
+an additive term of the bearing sensor in time (after the lag). `s·f(t)` holds the
+sensor's `f(t)` beside it and wins over it only by a held-out interval above zero. Its
+formula is built from the variables of the winning input (`_dictionary`). The thermal
+null is the calibrated model (its lag included) on the records' own inputs.
 """
 
 from __future__ import annotations
@@ -225,7 +234,9 @@ def _lag_columns(x, tau, dt):
 class Discovered:
     """What discovery found in one slot (see the module doc for the method).
 
-    - `slot`: the physical place (`"additional force on the axis"`).
+    - `slot`: the physical place (drive: `"additional force on the axis"`; thermal:
+        `"additional heat flow into the bearing node"` or `"additive term of the bearing
+        sensor"`).
     - `fired`: whether the flexible term beat the null (nothing else is meaningful when not).
     - `input`: the slot input whose flexible term alone removes most of the held-out gap.
     - `inputs`: per input (and `"all"`), the flexible term's held-out `reduction`,
@@ -609,7 +620,8 @@ def discover(
         `jaxvs.diagnose` (its final model and experiments are used), or a calibrated
         `GapModel`, with `calibration` and `validation` its prepared experiments (held
         out: the validation experiments are never fitted).
-    - `family`: the family name (`"drive"`) or instance; taken from the report.
+    - `family`: the family name (`"drive"`, `"thermal"`) or instance; taken from the
+        report.
     - `n_null`: effect-free records the discovery step is run on (the null that pays
         for the choice of the input; default 19: the 95th percentile is about their
         largest); `0` skips the null (threshold 0; for tests of the formula only).
@@ -882,7 +894,7 @@ def discover(
     if med_u > 0:
         lo = np.where([m.kind.shape == "F" for m in fm], np.log(med_u), lo)  # a limit, not u
     logs0 = np.clip(logs0, lo + 1e-9, hi - 1e-9)
-    fit = _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi, through_lag)
+    fit = _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, (lo, hi), through_lag)
     theta, pred_f, jtj, r_w = fit
     p = p_model
     k = int(sum(m.kind.k for m in fm))
@@ -995,7 +1007,8 @@ def _base_jacobian(model, flat, cal) -> np.ndarray:
     return np.concatenate([np.asarray(jac(jnp.asarray(flat), e.jax_arrays())) for e in cal])
 
 
-def _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, lo, hi, through_lag=False):
+def _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, bounds, through_lag=False):
+    lo, hi = bounds
     _, unravel, static = _split(model)
     st = _stack(exps, sorted(exps[0].arrays))
     w = np.zeros((len(exps), st["y"].shape[1]))
@@ -1042,8 +1055,7 @@ def _shape(
     coefficient absorbs, is not drawn), as the formula's is.
     For the term `v·f(t)` the figure is the viscous coefficient `f(t)`
     over time (term and residual divided by `v` where the speed is above 30 % of its top),
-    likewise `s·f(t)` of the thermal heat flow. A heat flow's term is drawn before the lag
-    (the bearing's static temperature rise)."""
+    likewise `s·f(t)` of the thermal heat flow (drawn before the lag)."""
     key = basis.inputs[label]
     c = np.asarray(theta[p:])
     sl = basis.blocks[label]

@@ -259,15 +259,36 @@ def _fit_fixed(arrays, static, active, sel, psize, batch, wfit, max_steps: int, 
             m = unwrap(eqx.combine(unravel(theta_full), pstatic))
             return ((jax.vmap(lambda a: m(a, active))(inputs) - y) * wfit).ravel()
 
-        r0 = full(flat)
-        js = jax.vmap(lambda v: jax.jvp(full, (flat,), (v,))[1])(ps.T)  # (s, N)
-        norms = jnp.linalg.norm(js, axis=1)
-        safe = jnp.where(norms > 0, norms, 1.0)
-        jn = js / safe[:, None]
-        gram = jn @ jn.T + 1e-10 * jnp.eye(jn.shape[0], dtype=jn.dtype)
-        delta = -jnp.linalg.solve(gram, jn @ r0) / safe
-        delta = jnp.where(jnp.all(jnp.isfinite(delta)), delta, 0.0)
-        flat = flat + ps @ delta
+        def linear(flat_k):
+            """The residual at `flat_k` and its Jacobian in the calibrated entries."""
+            base_k = flat_k - sel @ (sel.T @ flat_k)
+
+            def twice(theta):
+                r = full(base_k + sel @ theta)
+                return r, r
+
+            jac, r = jax.jacfwd(twice, has_aux=True)(sel.T @ flat_k)
+            return r, jac
+
+        def sized(k, carry):
+            # k = 0: the sizes of the start's effect by least squares from the columns of
+            # the Jacobian they own (`ps` selects calibrated entries); k = 1: the residual
+            # and Jacobian there, the Levenberg-Marquardt start. One loop body, so the
+            # model's derivative is compiled once for both points
+            flat_k, _, _ = carry
+            r, jac = linear(flat_k)
+            js = (jac @ (sel.T @ ps)).T  # (s, N)
+            norms = jnp.linalg.norm(js, axis=1)
+            safe = jnp.where(norms > 0, norms, 1.0)
+            jn = js / safe[:, None]
+            gram = jn @ jn.T + 1e-10 * jnp.eye(jn.shape[0], dtype=jn.dtype)
+            delta = -jnp.linalg.solve(gram, jn @ r) / safe
+            delta = jnp.where(jnp.all(jnp.isfinite(delta)), delta, 0.0)
+            return jnp.where(k == 0, flat_k + ps @ delta, flat_k), r, jac
+
+        n_res = y.size
+        carry = (flat, jnp.zeros((n_res,), flat.dtype), jnp.zeros((n_res, sel.shape[1])))
+        flat, r1, jac1 = jax.lax.fori_loop(0, 2, sized, carry)
         base = flat - sel @ (sel.T @ flat)
 
         def resid(theta):
@@ -278,7 +299,8 @@ def _fit_fixed(arrays, static, active, sel, psize, batch, wfit, max_steps: int, 
             jac = jax.jacfwd(resid)(theta)
             return 0.5 * jnp.dot(r, r), jac.T @ jac, jac.T @ r
 
-        state = lm_init(evaluate, sel.T @ flat, None, 1e-8)
+        start = (0.5 * jnp.dot(r1, r1), jac1.T @ jac1, jac1.T @ r1)
+        state = lm_init(lambda theta, args: start, sel.T @ flat, None, 1e-8)
         cost_start = state.cost
         state = jax.lax.while_loop(
             lambda s: lm_running(s, max_steps),
@@ -880,10 +902,11 @@ def _same_structure(a: Layout, b: Layout) -> bool:
         x, y = x.constrained(), y.constrained()
         if jax.tree_util.tree_structure(x) != jax.tree_util.tree_structure(y):
             return False
-        lx, ly = jax.tree_util.tree_leaves(x), jax.tree_util.tree_leaves(y)
-        if [(np.shape(v), np.result_type(v)) for v in lx] != [
-            (np.shape(v), np.result_type(v)) for v in ly
-        ]:
+
+        def shapes(tree):
+            return [(jnp.shape(v), jnp.result_type(v)) for v in jax.tree_util.tree_leaves(tree)]
+
+        if shapes(x) != shapes(y):
             return False
     return True
 

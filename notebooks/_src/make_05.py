@@ -55,7 +55,8 @@ cells = [
     ),
     code(
         "emps = jaxvs.diagnose(f'{DATA}/DATA_EMPS.mat', f'{DATA}/DATA_EMPS_PULSES.mat',\n"
-        "                      family='drive', max_effects=3, progress=True)\n"
+        "                      family='drive', max_effects=3, progress=True,\n"
+        "                      discover=False)  # discovery on EMPS: see the diagnosis guide\n"
         "print(emps.status_line)\n"
         "display(Markdown(emps.to_markdown()))"
     ),
@@ -122,7 +123,7 @@ cells = [
     md(
         "## An effect in no library: `unexplained`, and where it lies\n\n"
         "The spindle thermal twin without any effect, but its bearing thermocouple starts "
-        "drifting in the last 3 h of the 12 h record, by 1 K at the end. No library "
+        "drifting after the first 4 h of the 12 h record, by 1 K at the end. No library "
         "effect of the thermal family is a sensor drift. The diagnosis must not name one, "
         "and must not call the model adequate either: the remaining gap is above what "
         "the null's effect-free records leave, and the gap map of the final residual says "
@@ -131,8 +132,8 @@ cells = [
     code(
         "rec = SpindleThermalTwin().experiment(jr.key(11), duration=12 * 3600.0)\n"
         "sig = {k: np.asarray(rec[k]) for k in rec.names}\n"
-        "late = np.clip((np.linspace(0, 1, len(rec)) - 0.75) / 0.25, 0, 1)\n"
-        "sig['T_bearing'] = sig['T_bearing'] + 1.0 * late**2  # drifts by 1 K in the last 3 h\n"
+        "late = np.clip((np.linspace(0, 1, len(rec)) - 1 / 3) / (2 / 3), 0, 1)\n"
+        "sig['T_bearing'] = sig['T_bearing'] + 1.0 * late**2  # drifts by 1 K after 4 h\n"
         "drift = jaxvs.diagnose(Record(sig, dt=rec.dt), family='thermal')\n"
         "print(drift.status_line)\n"
         "for w in drift.verdict['remainder']['where']:\n"
@@ -171,11 +172,16 @@ cells = [
         "assert found.fired and found.input == 'time (sensor)'"
     ),
     md(
-        "The drift is a term of time in the sensor slot, as built. Its late, quadratic onset "
-        "is not one of the dictionary's kinds, and the answer says so rather than forcing a "
-        "formula: the flexible term's shape over time is the finding. On a drive whose "
-        "viscous friction fades as it warms up, the same step finds the formula "
-        "`40·v·exp(−t/8)` itself (`benchmarks/discovery.py`)."
+        "The drift is placed in the sensor slot, on time, as built; no term in speed, "
+        "temperatures or speed·time does better on held-out data. Its exact law, a "
+        "quadratic onset after 4 h, is not one of the dictionary's kinds: the formula is the "
+        "combination of `t`, `t²` and `exp(−t/τ)` that the evidence keeps, and it is "
+        "accepted because it predicts the held-out block (it extends the drift where the "
+        "flexible term, flat beyond its calibration data, cannot). Read it as a description "
+        "of the drift over this record, not as its physical law. On a drive whose viscous "
+        "friction fades as it warms up, the same step finds the true formula "
+        "`40·v·exp(−t/8)` (`benchmarks/discovery.py`); a term outside the dictionary that "
+        "the kinds cannot imitate gets \"no formula found\" and the flexible term's shape."
     ),
     md(
         "The same call serves the `tmf` and `thermal` families (`jaxvs diagnose DATA ... "
