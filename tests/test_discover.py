@@ -412,3 +412,19 @@ def test_a_thermal_term_of_a_library_effect_is_reported_as_that_effect():
     d = _discover_thermal(_thermal_plant(heat=lambda t, s: 4.0 * (s / SMAX) ** 2))
     assert d.fired and d.slot == "additional heat flow into the bearing node"
     assert d.named_instead and d.nearest_effect == "speed_nonlinearity", d.message
+
+
+@pytest.mark.slow
+def test_diagnose_runs_thermal_discovery_after_the_named_search():
+    """`jaxvs.diagnose` on the running-in plant: the named search adds the bearing's lag
+    (`dynamics`), the remainder stays above the null, and discovery finds the heat flow
+    in speed and time through that lag; its result is in `report.json`."""
+    import jaxvs
+
+    record = _thermal_plant(heat=lambda t, s: 3.0 * s / SMAX * math.exp(-t / 10800.0))
+    report = jaxvs.diagnose(record, family="thermal", n_null=9, n_boot=100)
+    assert report["verdict"]["effects"] == ["dynamics"]
+    found = json.loads(json.dumps(report.to_json()))["discovered"]
+    assert found["fired"] and found["found"], found["message"]
+    assert found["slot"] == "additional heat flow into the bearing node"
+    assert "(s/smax)·exp(-t/tau)" in [tm["kind"] for tm in found["terms"]]
