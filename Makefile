@@ -17,7 +17,7 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -n 2 --dist loadgroup --max-worker-restart=0 --durations=15 tests
-	$(PY) -m pytest --nbmake notebooks -p no:randomly -o filterwarnings=
+	$(PY) -m pytest --nbmake --nbmake-timeout=900 notebooks -p no:randomly -o filterwarnings=
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
 
 bench: $(STAMP)
