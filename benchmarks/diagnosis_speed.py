@@ -288,7 +288,7 @@ def _diff(a, b, path="", out=None, worst=None):
 
 def _fmt_stage_table(run: dict) -> list[str]:
     lines = [
-        "| stage | CPU [s] | of which XLA compile [s] (compilations) | of which bootstrap [s] |",
+        "| stage | CPU [s] | XLA compile in it, wall clock [s] (compilations) | bootstrap [s] |",
         "|---|---|---|---|",
     ]
     for stage, cpu in sorted(run["stages_cpu"].items(), key=lambda kv: -kv[1]):
@@ -314,8 +314,16 @@ def write(results: dict) -> None:
         "",
         "Reproduce: `python benchmarks/diagnosis_speed.py --label after`.",
         "",
+        "Where the time goes: XLA compilation of the search's fitting program (in the nominal "
+        "calibration, the first call), of `fit_rational` (in the check, which initialises "
+        "the nominal TMF) and of the check's Jacobian is the largest share of a first run; "
+        "the rest is the Levenberg-Marquardt runs of the candidates and of the null records "
+        "(a scan over the record per derivative, bound by the steps of the scan). CPU time "
+        "grows with the machine's load (shared caches): compare labels measured under "
+        "similar load averages.",
+        "",
         "| label | date | commit | persistent cache | CPU [s] | wall [s] | load average (1 min, "
-        "before → after) | XLA compile [s] (compilations) |",
+        "before → after) | XLA compile, wall clock [s] (compilations) |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for label, entry in results["runs"].items():
