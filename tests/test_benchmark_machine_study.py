@@ -3,22 +3,15 @@ contour-error measure, its paths and its three-drive simulation against independ
 oracles. The whole study (calibration, 50³ map, suggestion, contouring) takes about four
 minutes on 2 cores; `make bench` runs it at full size (degree 4, a 20 s path)."""
 
-import importlib.util
-from pathlib import Path
-
 import jax
 import numpy as np
 import pytest
-
-PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "machine_study.py"
+from benchmark_module import load_benchmark
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("machine_study", PATH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("machine_study")
 
 
 def test_contour_error_is_the_distance_to_the_path(bench):

@@ -6,25 +6,18 @@ analytic checks, the throughput comparison and the test-cycle command instead, e
 against an independent oracle.
 """
 
-import importlib.util
-from pathlib import Path
-
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from benchmark_module import load_benchmark
 
 import jaxvs
 from jaxvs.twins import MachineStructureTwin
 
-PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "tmf_study.py"
-
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("tmf_study", PATH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("tmf_study")
 
 
 @pytest.mark.slow

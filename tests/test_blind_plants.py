@@ -2,16 +2,12 @@
 closed forms and scipy, never against the diagnosis."""
 
 import dataclasses
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.signal as ss
-
-PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "blind_plants.py"
+from benchmark_module import load_benchmark
 
 # docs/guides/contracts.md, effect names (exact strings) -- the oracle for the case list
 EFFECT_NAMES = {
@@ -38,11 +34,7 @@ EFFECT_NAMES = {
 
 @pytest.fixture(scope="module")
 def bp():
-    spec = importlib.util.spec_from_file_location("blind_plants", PATH)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["blind_plants"] = module  # dataclasses need the module registered
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("blind_plants")
 
 
 def _quiet(case, **settings):

@@ -15,15 +15,13 @@ built independently of the effect classes.
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
-import sys
-from pathlib import Path
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from benchmark_module import load_benchmark
 
 from jaxvs.diagnosis import _drive, _thermal, _tmf
 from jaxvs.diagnosis._base import AbstractEffect, Context, GapModel
@@ -32,7 +30,6 @@ from jaxvs.diagnosis._families import FAMILIES
 jax.config.update("jax_enable_x64", True)
 pytestmark = pytest.mark.slow  # about 2 minutes idle: three records, 17 effects compiled
 
-PLANTS = Path(__file__).resolve().parents[1] / "benchmarks" / "blind_plants.py"
 RECORD = {
     "drive": "drive-free-1khz",
     "tmf": "tmf-free-5khz-force-channel",
@@ -94,10 +91,7 @@ def _concrete_subclasses(cls):
 def templates():
     """Per family: the prepared experiments, the initialised nominal model, the
     admissibility context and, per library entry, its first starting effect."""
-    spec = importlib.util.spec_from_file_location("blind_plants", PLANTS)
-    bp = importlib.util.module_from_spec(spec)
-    sys.modules["blind_plants"] = bp
-    spec.loader.exec_module(bp)
+    bp = load_benchmark("blind_plants")
     out = {}
     for family, case_name in RECORD.items():
         case = next(c for c in bp.cases() if c.name == case_name)
