@@ -344,6 +344,10 @@ class AbstractFamily(abc.ABC):
     optional: ClassVar[tuple[str, ...]]
     option_keys: ClassVar[tuple[str, ...]]
     metric: ClassVar[str] = "nrmse"
+    early_layout: ClassVar[bool] = False
+    """Whether the structure of the library's templates is known before the nominal
+    calibration (the search then compiles one fitting program for the nominal model, the
+    null refits and the rounds)."""
     target_label: ClassVar[str] = "target"
 
     def __init__(self, **options: Any):

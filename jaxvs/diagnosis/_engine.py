@@ -882,7 +882,7 @@ def _early_layout(family, library, candidates, start, exps, n_cal_exp) -> Layout
     uncalibrated start, for a family that says its templates' structure does not depend
     on the calibration (`family.early_layout`) and a library that refreshes no data; the
     first round checks the structure and puts its own templates in. `None` otherwise."""
-    if not getattr(family, "early_layout", False) or any(s.refresh for s in library):
+    if not family.early_layout or any(s.refresh for s in library):
         return None
     cal = exps[:n_cal_exp]
     ctx = Context(start, cal, [e.y for e in cal], family.options)
@@ -898,17 +898,15 @@ def _same_structure(a: Layout, b: Layout) -> bool:
     slot, the same tree, static fields, shapes and dtypes."""
     if (a.names, a.batch, a.keys) != (b.names, b.batch, b.keys):
         return False
-    for x, y in zip(a.defaults, b.defaults):
-        x, y = x.constrained(), y.constrained()
-        if jax.tree_util.tree_structure(x) != jax.tree_util.tree_structure(y):
-            return False
 
-        def shapes(tree):
-            return [(jnp.shape(v), jnp.result_type(v)) for v in jax.tree_util.tree_leaves(tree)]
+    def signature(effect):
+        tree = effect.constrained()
+        leaves = jax.tree_util.tree_leaves(tree)
+        return jax.tree_util.tree_structure(tree), [
+            (jnp.shape(v), jnp.result_type(v)) for v in leaves
+        ]
 
-        if shapes(x) != shapes(y):
-            return False
-    return True
+    return all(signature(x) == signature(y) for x, y in zip(a.defaults, b.defaults))
 
 
 def _refreshed(refreshers, null_sets, null_res):
