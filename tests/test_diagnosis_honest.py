@@ -18,6 +18,7 @@ import pytest
 import jaxvs
 from jaxvs._cli import main
 from jaxvs.data import Record, save_csv
+from jaxvs.diagnosis._acceptance import null_threshold
 from jaxvs.diagnosis._base import AdmissibilityContext
 from jaxvs.diagnosis._drive import (
     AsymmetricFrictionEffect as AsymmetricFriction,
@@ -30,7 +31,7 @@ from jaxvs.diagnosis._drive import (
     TimeDelay,
     identify_controller,
 )
-from jaxvs.diagnosis._engine import CandidateResult, choose, null_threshold, primary_effect
+from jaxvs.diagnosis._engine import CandidateResult, choose, primary_effect
 from jaxvs.diagnosis._stats import effective_samples, quantisation_step
 from jaxvs.diagnosis._thermal import (
     AmbientTemperature,

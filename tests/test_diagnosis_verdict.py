@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from jaxvs.data import Record
+from jaxvs.diagnosis._acceptance import evidence_samples, noise_sample_share
 from jaxvs.diagnosis._distortion import nonlinear_distortion
-from jaxvs.diagnosis._engine import evidence_samples, noise_sample_share
 from jaxvs.diagnosis._report import DiagnosisReport
 from jaxvs.diagnosis._stats import bic_effective, effective_samples
 from jaxvs.diagnosis._tmf import TMFFamily, record_noise

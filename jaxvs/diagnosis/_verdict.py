@@ -24,7 +24,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["STATES", "decide", "status_line"]
+__all__ = ["STATES", "decide", "null_bound", "status_line"]
+
+# the relative uncertainty of the noise level the null records are drawn with (`decide`)
+TOLERANCE = 0.25
 
 STATES = ("adequate", "explained", "partly_explained", "unexplained")
 
@@ -38,6 +41,15 @@ def null_quantile(null_gaps: Sequence[float], level: float = 0.95) -> float:
     return float(np.quantile(g, level)) if g.size else float("inf")
 
 
+def null_bound(
+    null_gaps: Sequence[float], level: float = 0.95, tolerance: float = TOLERANCE
+) -> float:
+    """The largest held-out gap that lies within the null: `(1 + tolerance)` times the
+    null's `level` quantile (`decide` explains the tolerance). A nominal model whose gap
+    is below it is `adequate`, and the search tries no candidate on it."""
+    return (1.0 + tolerance) * null_quantile(null_gaps, level)
+
+
 def decide(
     accepted: Sequence[str],
     remaining_gap: float,
@@ -46,7 +58,7 @@ def decide(
     cells_after: Sequence[dict[str, Any]] = (),
     *,
     level: float = 0.95,
-    tolerance: float = 0.25,
+    tolerance: float = TOLERANCE,
     fdr: float = 0.05,
     n_cells: int = 5,
 ) -> dict[str, Any]:
@@ -70,7 +82,7 @@ def decide(
     within the null).
     """
     p95 = null_quantile(null_gaps, level)
-    threshold = (1.0 + tolerance) * p95
+    threshold = null_bound(null_gaps, level, tolerance)
     within = bool(np.isfinite(remaining_gap) and remaining_gap <= threshold)
     if accepted:
         status = "explained" if within else "partly_explained"
