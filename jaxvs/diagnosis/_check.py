@@ -34,7 +34,8 @@ from .._html import markdown_to_html, report_html
 from .._misc import json_safe, require_x64
 from ..data import Record, signal_quality
 from ._base import GapModel, NotIdentifiable, unwrap
-from ._diagnose import _CHECK_VALUES, FAMILIES, _check_signals, _memory_check, _records
+from ._families import FAMILIES
+from ._inputs import CHECK_VALUES, check_signals, memory_check, records
 from ._options import validate_options
 
 __all__ = ["CHECK_SCHEMA_VERSION", "CheckReport", "check"]
@@ -314,12 +315,12 @@ def check(
     require_x64("check", "the nominal model's calibration and its Jacobian")
     if family not in FAMILIES:
         raise ValueError(f"check: unknown family {family!r}; choose one of {sorted(FAMILIES)}.")
-    recs = _records(data, "calibration", signals, "check")
+    recs = records(data, "calibration", signals, "check")
     fam = FAMILIES[family](
         **validate_options(family, options, "check", FAMILIES[family].option_keys)
     )
-    _check_signals(fam, recs, "check")
-    _memory_check(fam, sum(len(r) for r, _ in recs), "check", _CHECK_VALUES)
+    check_signals(fam, recs, "check")
+    memory_check(fam, sum(len(r) for r, _ in recs), "check", CHECK_VALUES)
     return check_records(fam, recs)
 
 

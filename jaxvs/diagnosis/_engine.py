@@ -117,6 +117,36 @@ class CandidateResult:
             return -np.inf
         return self.gap_before - self.validation_gap
 
+    def to_json(self) -> dict[str, Any]:
+        """The candidate as `report.json` shows it (`candidates[i]`)."""
+        return {
+            "effect": self.effect,
+            "testable": self.testable,
+            "reason": self.reason,
+            "description": self.description,
+            "signature": self.signature,
+            "round": self.round,
+            "calibration_gap": self.calibration_gap,
+            "validation_gap": self.validation_gap,
+            "validation_gap_before": self.gap_before,
+            "shrink": self.shrink,
+            "shrink_interval": list(self.shrink_interval) if self.shrink_interval else None,
+            "reduction_interval": (
+                list(self.reduction_interval) if self.reduction_interval else None
+            ),
+            "delta_bic": self.delta_bic,
+            "admissible": self.admissible,
+            "null_p95": self.null_p95,
+            "null_median": self.null_median,
+            "null_threshold": self.null_threshold,
+            "rejected_by": self.rejected_by,
+            "explained": self.explained if self.accepted else None,
+            "accepted": self.accepted,
+            "extends": self.extends,
+            "parameters": self.parameters,
+            "seconds": self.seconds,
+        }
+
     def record(self, trial: Trial, y_cal: np.ndarray, n_cal_exp: int) -> None:
         """Show `trial` as this candidate's latest try."""
         ev = trial.evidence
