@@ -161,6 +161,14 @@ class DiagnosisReport:
                 f"that is not in the library. Validation gap {pct(g['validation'])}, noise "
                 f"floor {pct(g['noise_floor'])}."
             )
+        elif v.get("searched") is False:
+            lines.append(
+                "The nominal model's held-out gap already lies within what it leaves on "
+                "effect-free records of the same set-up (the null), so no candidate effect was "
+                "tried: with nothing to explain, trying the whole library could only find "
+                "chance improvements. The nominal model is adequate up to the noise floor. "
+                f"Validation gap {pct(g['validation'])}, noise floor {pct(g['noise_floor'])}."
+            )
         else:
             lines.append(
                 "No candidate effect passed (an admissible fit whose held-out gap reduction "
