@@ -161,6 +161,7 @@ def test_drive_effect_free_twin_gives_no_effect(tmp_path, capsys):
     assert rep["family"] == "drive"
     assert rep["verdict"]["status"] == "adequate" and rep["verdict"]["adequate"] is True
     assert rep["verdict"]["remainder"]["within_null"] and not rep["verdict"]["remainder"]["where"]
+    assert rep["verdict"]["searched"] is False and rep["rounds"] == []
     assert set(rep["gap"]) >= {"metric", "calibration", "validation", "noise_floor"}
     assert rep["gap"]["metric"] == "nrmse"
     assert rep["verdict"]["effects"] == []

@@ -81,6 +81,9 @@ def test_effect_free_twin_accepts_nothing_and_reports_untestable(effect_free):
     assert json["family"] == "thermal" and json["verdict"]["effects"] == []
     # nothing accepted and the remainder within the null: adequate, said first
     assert json["verdict"]["status"] == "adequate" and json["verdict"]["adequate"] is True
+    # within the null already: no candidate is tried (the omnibus test protects the many)
+    assert json["verdict"]["searched"] is False and json["rounds"] == []
+    assert "no candidate effect was tried" in rep.to_markdown()
     assert repr(rep).splitlines()[1].startswith("verdict: adequate")
     assert rep.to_markdown().splitlines()[2].startswith("**verdict: adequate")
 
