@@ -1,6 +1,6 @@
 """Signal processing: Welch spectra, FRF and transmissibility estimation, coherence, windows,
 filtering, resampling, the moving-block bootstrap of autocorrelated series, the best linear
-approximation of a system under periodic excitation."""
+approximation of a system under periodic excitation, the analysis band of a drive record."""
 
 from ._basis import (
     bspline_basis as bspline_basis,
@@ -29,6 +29,7 @@ from ._cwt import (
     morlet_scales as morlet_scales,
 )
 from ._differentiate import differentiate as differentiate
+from ._drive_band import DriveBand as DriveBand, DriveSignals as DriveSignals
 from ._filter import decimate as decimate, filtfilt_lowpass as filtfilt_lowpass
 from ._resample import resample as resample
 from ._spectral import (
