@@ -274,9 +274,6 @@ LONG_SIGNATURES = {
     # Pending: diagnosis and design internals, rebuilt in their own change.
     "jaxvs.diagnosis._engine:search",
     "jaxvs.diagnosis._engine:_prune",
-    "jaxvs.studies.design._design:_loop_reference",
-    "jaxvs.studies.design._search:_train_impl",
-    "jaxvs.studies.design._search:train_network_group",
     "jaxvs.studies.benchmarks._shooting:fit_multiple_shooting",
     # Pending: options objects still to be drawn (a plant's physical parameters, the
     # solver options of calibrate / solve_ode / trainlm, the modal-fit tolerances).
@@ -289,8 +286,6 @@ LONG_SIGNATURES = {
     "jaxvs.calibration._fit_rational:_fit_batch",
     "jaxvs.models._nonlinear_simulate:solve_ode",
     "jaxvs.studies.drive._drive_calibration:calibrate_drive",
-    "jaxvs.studies.thermal._train:train_lm",
-    "jaxvs.studies.thermal._train:_lm_impl",
     "jaxvs.studies.tmf._tmf:tmf_from_frfs",
     "jaxvs.studies.tmf._tmf:_add_modes_by_misfit",
     "jaxvs.diagnosis._discover:_fit_formula",

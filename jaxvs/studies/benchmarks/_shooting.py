@@ -14,8 +14,8 @@ adds a continuity residual between the end of segment `s` and the start of `s + 
                      + ρ² Σ_{s<S} ‖(x_s^end(θ, x_s) − x_{s+1}) / σ_x‖².
 
 Each segment is short, so the cost is smooth; the continuity term ties the segments into
-one trajectory as `ρ` grows. The Levenberg–Marquardt kernel of `jaxvs.calibration`
-(`lm_init` / `lm_step`) solves it from its normal equations; the Jacobian is built per
+one trajectory as `ρ` grows. The one Levenberg–Marquardt of `jaxvs.calibration`
+(`lm_solve`) solves it from its normal equations; the Jacobian is built per
 segment (forward mode, `p + n_x` directions on `L` samples each) and assembled in its
 block structure, so a step costs `O(S·L·(p + n_x))` simulations steps instead of
 `O(S·L·(p + S·n_x))`.
@@ -35,7 +35,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from ...calibration import RESULTS, free_spec, lm_init, lm_result, lm_running, lm_step
+from ...calibration import RESULTS, free_spec, lm_init, lm_result, lm_solve
 
 __all__ = ["AbstractSimulator", "ShootingResult", "fit_multiple_shooting"]
 
@@ -311,11 +311,7 @@ def fit_multiple_shooting(
         args = (us, ys, ws, fixed)
         state = lm_init(evaluate, z0, args, rtol)
         initial = state.cost
-        state = jax.lax.while_loop(
-            lambda s: lm_running(s, max_steps),
-            lambda s: lm_step(evaluate, feasible_z, s, args, rtol),
-            state,
-        )
+        state = lm_solve(evaluate, state, args, max_steps=max_steps, rtol=rtol, feasible=feasible_z)
         return state, initial
 
     start = time.perf_counter()
