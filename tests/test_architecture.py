@@ -277,24 +277,10 @@ LONG_SIGNATURES = {
     "jaxvs.studies.benchmarks._shooting:fit_multiple_shooting",
     # Pending: options objects still to be drawn (a plant's physical parameters, the
     # solver options of calibrate / solve_ode / trainlm, the modal-fit tolerances).
-    "jaxvs.twins._thermal:SpindleThermalTwin.__init__",
-    "jaxvs.twins._drive:DriveTwin.__init__",
-    "jaxvs.twins._structure:MachineStructureTwin.impact_experiment",
-    "jaxvs.twins._structure:MachineStructureTwin.tmf_experiment",
     "jaxvs.calibration._calibrate:calibrate",
-    "jaxvs.calibration._modal_fit:modal_fit",
-    "jaxvs.calibration._fit_rational:_fit_batch",
-    "jaxvs.models._nonlinear_simulate:solve_ode",
     "jaxvs.studies.drive._drive_calibration:calibrate_drive",
     "jaxvs.studies.tmf._tmf:tmf_from_frfs",
-    "jaxvs.studies.tmf._tmf:_add_modes_by_misfit",
     "jaxvs.diagnosis._discover:_fit_formula",
-    # Pending: the lane flags of the LTI simulation engine (lanes of the table, of the
-    # input and of the target, SISO shapes, reduction) to be drawn into one static layout.
-    "jaxvs.models._simulate:_engine",
-    "jaxvs.models._simulate:_map_groups",
-    "jaxvs.models._simulate:_run_group",
-    "jaxvs.models._simulate:_simulate_flat",
 }
 
 

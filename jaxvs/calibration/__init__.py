@@ -43,6 +43,7 @@ from ._lm import (
 )
 from ._lscf import (
     PoleTrack as PoleTrack,
+    StabilisationCriteria as StabilisationCriteria,
     StabilisationDiagram as StabilisationDiagram,
     pole_tracks as pole_tracks,
     select_poles as select_poles,

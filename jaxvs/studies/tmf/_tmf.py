@@ -394,16 +394,18 @@ def _estimate_highpass(omega, H2, sw, q, wn, ze, band, diagram, rw) -> float:
 MODE_GAIN = 0.1
 
 
-def _add_modes_by_misfit(omega, H2, sw, q, wn, ze, band, a_hp, diagram, rw, auto_hp: bool):
+def _add_modes_by_misfit(omega, H2, sw, q, modes, band, a_hp, diagram, rw, auto_hp: bool):
     """Forward selection on top of the stabilisation-diagram choice: the remaining pole
     tracks (stable over >= 2 orders, > 2 % away in frequency from the chosen ones) are
     tried longest first, and each joins when it lowers the summed squared LSFD misfit of
     both FRFs by more than `MODE_GAIN`. Heavily damped modes (ζ ~ 0.2) stabilise over few
     orders and may miss the diagram's default threshold, and a TMF without one of its modes
     is wrong by far more than the noise. With `auto_hp` the sensor high-pass is estimated
-    again after each added mode (a missing mode biases it).
+    again after each added mode (a missing mode biases it). `modes`: the chosen
+    `(omega_n, zeta)`.
 
     **Returns:** `(omega_n, zeta, a_hp)`."""
+    wn, ze = modes
 
     def misfit(w_, z_):
         fit = _receptance_lsfd(omega, H2, sw, q, w_, z_, band, a_hp, diagram, rw)
@@ -598,7 +600,7 @@ def tmf_from_impacts(
         a_hp = 0.0 if highpass is None else float(highpass)
     if n_modes is None and not lower_residual:
         wn, ze, a_hp = _add_modes_by_misfit(
-            omega, H2, sw, q, wn, ze, band, a_hp, fit.diagram, rw, highpass == "auto"
+            omega, H2, sw, q, (wn, ze), band, a_hp, fit.diagram, rw, highpass == "auto"
         )
     if not lower_residual:
         fit = _receptance_lsfd(omega, H2, sw, q, wn, ze, band, a_hp, fit.diagram, rw)
