@@ -612,8 +612,7 @@ class MachineStructureTwin(eqx.Module):
         emphasis: float = 3.0,
         command: ArrayLike | None = None,
         return_truth: bool = False,
-        sensors: TMFSensors | None = None,
-        **keywords: Any,
+        **sensors: Any,
     ) -> list[Record] | tuple[list[Record], dict[str, np.ndarray]]:
         """Diagnosis data of the `tmf` family: one record per Y position (docs/guides/contracts.md).
 
@@ -648,7 +647,7 @@ class MachineStructureTwin(eqx.Module):
         - `return_truth`: also return a dict with the noiseless, undelayed `x_t`
           (`"x_t_true"`, `(position, time)`), the encoder position before quantisation
           (`"x_e_true"`) and the actual force (`"f_true"`).
-        - `sensors`: a [`TMFSensors`][], or its fields as keywords: `noise` (standard
+        - the fields of [`TMFSensors`][] as keywords (defaults there): `noise` (standard
           deviation of the reference TCP sensor noise [m]), `encoder_resolution`
           (quantisation step of the linear encoder [m]), `force_noise` (standard deviation
           of the force-sensor noise [N]), `oversample` (internal simulation steps per
@@ -658,7 +657,7 @@ class MachineStructureTwin(eqx.Module):
 
         A list of `jaxvs.data.Record`, one per Y position (and the truth, see above).
         """
-        sensors = options_object(TMFSensors, sensors, keywords, "tmf_experiment", "sensors")
+        sensors = options_object(TMFSensors, None, sensors, "tmf_experiment", "sensors")
         noise, encoder_resolution = sensors.noise, sensors.encoder_resolution
         force_noise, oversample = sensors.force_noise, sensors.oversample
         ys = np.atleast_1d(np.asarray(ys, float))
