@@ -269,16 +269,11 @@ LONG_SIGNATURES = {
     "jaxvs.diagnosis._diagnose:diagnose",  # jaxvs diagnose
     "jaxvs.studies.design._design:design",  # jaxvs design
     "jaxvs.diagnosis._discover:discover",  # the discovery options of jaxvs diagnose
-    "jaxvs.calibration._calibrate:calibrate",  # the calibration of jaxvs demo / diagnose
+    "jaxvs.calibration._calibrate:calibrate",  # shaped like optimistix.least_squares
     # Pending: diagnosis internals, rebuilt in their own change.
     "jaxvs.diagnosis._engine:search",
     "jaxvs.diagnosis._engine:_prune",
     "jaxvs.diagnosis._discover:_fit_formula",
-    # Pending: the study entry points' options objects (the shooting fit's scaling and
-    # solver settings, the drive record's signal names, the TMF routes' modal options).
-    "jaxvs.studies.benchmarks._shooting:fit_multiple_shooting",
-    "jaxvs.studies.drive._drive_calibration:calibrate_drive",
-    "jaxvs.studies.tmf._tmf:tmf_from_frfs",
 }
 
 
