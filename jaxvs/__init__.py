@@ -33,6 +33,7 @@ from .calibration import (
     CalibrationResult as CalibrationResult,
     FitReport as FitReport,
     ModalFit as ModalFit,
+    StabilisationCriteria as StabilisationCriteria,
     StabilisationDiagram as StabilisationDiagram,
     SweepResult as SweepResult,
     calibrate as calibrate,

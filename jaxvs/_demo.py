@@ -34,6 +34,7 @@ def run_demo(
     jax.config.update("jax_enable_x64", True)  # the CLI is a program, not library code
 
     import jaxvs
+    from jaxvs.calibration import RESULTS
     from jaxvs.plotting import bode_plot
     from jaxvs.signal import transmissibility
     from jaxvs.twins import MachineStructureTwin
@@ -82,6 +83,8 @@ def run_demo(
 
     poles = np.asarray(jaxvs.poles(tmf))
     f_modes = np.sort(np.abs(poles.imag[:, poles.imag[0] > 0]) / (2 * np.pi), axis=-1)
+    # one result code per position (the fit is batched over the positions)
+    converged = np.asarray(jax.vmap(lambda r: r == RESULTS.successful)(report.result))
     rows = []
     for i in range(n_positions):
         rows.append(
@@ -92,7 +95,7 @@ def run_demo(
                 "tmf_error_calibrated": float(err_fit[i]),
                 "virtual_sensor_error_vs_tcp_motion": float(vs_err_motion[i]),
                 "virtual_sensor_error_vs_deflection": float(vs_err[i]),
-                "result": str(report.result[i]) if hasattr(report.result, "__getitem__") else "",
+                "result": "successful" if converged[i] else "failed",
             }
         )
     summary = {

@@ -16,6 +16,7 @@ from jaxvs.studies.design import DesignDataWarning, DesignedSensor
 from jaxvs.studies.design._score import rank_designs
 from jaxvs.studies.design._search import (
     Candidate,
+    NetworkTraining,
     feature_mask,
     fit_linear_group,
     train_network_group,
@@ -105,7 +106,7 @@ def test_batched_network_training_equals_loop():
     role = np.zeros(n, int)
     role[120:] = 1
     cands = [Candidate("mlp", (0,), (0,), hidden=3), Candidate("tdnn", (0, 1), (0, 1), hidden=3)]
-    kw = dict(inits=2, key=jr.key(0), max_steps=20)
+    kw = dict(inits=2, key=jr.key(0), training=NetworkTraining(max_steps=20))
     a = train_network_group(cands, X, y, role, m, dmax, **kw)
     b = train_network_group(cands, X, y, role, m, dmax, loop=True, **kw)
     # the same per-member computation, batched by vmap or run one by one: equal to rounding

@@ -26,6 +26,8 @@ from ._fit_rational import (
 )
 from ._lm import (
     AbstractDamping as AbstractDamping,
+    AbstractLMMonitor as AbstractLMMonitor,
+    BatchSchedule as BatchSchedule,
     LevenbergMarquardt as LevenbergMarquardt,
     LMState as LMState,
     MarquardtDamping as MarquardtDamping,
@@ -35,10 +37,13 @@ from ._lm import (
     lm_init as lm_init,
     lm_result as lm_result,
     lm_running as lm_running,
+    lm_solve as lm_solve,
+    lm_solve_family as lm_solve_family,
     lm_step as lm_step,
 )
 from ._lscf import (
     PoleTrack as PoleTrack,
+    StabilisationCriteria as StabilisationCriteria,
     StabilisationDiagram as StabilisationDiagram,
     pole_tracks as pole_tracks,
     select_poles as select_poles,

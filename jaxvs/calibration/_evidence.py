@@ -155,6 +155,18 @@ def _check(X, y, groups):
         )
 
 
+def _setup(X, y, groups, base, n_eff, g):
+    """The checked groups (default: one per column), the number of rows `n`, the effective
+    sample size, the base's column count and the prior scale `g` (default `n_eff`)."""
+    groups = [[j] for j in range(np.shape(X)[1])] if groups is None else [list(gr) for gr in groups]
+    _check(X, y, groups)
+    n = np.size(y)
+    n_eff = float(n if n_eff is None else min(max(n_eff, 2.0), n))
+    p_b = 0 if base is None else int(np.asarray(base).reshape(n, -1).shape[1])
+    g = n_eff if g is None else float(g)
+    return groups, n, n_eff, p_b, g
+
+
 def backward_elimination(
     X,
     y,
@@ -177,12 +189,7 @@ def backward_elimination(
     - `margin`: a group stays only when it raises the log evidence by more than this
         (default 0; 5 is a Bayes factor of e⁵, the ΔBIC of 10 named effects must pass).
     """
-    groups = [[j] for j in range(np.shape(X)[1])] if groups is None else [list(gr) for gr in groups]
-    _check(X, y, groups)
-    n = np.size(y)
-    n_eff = float(n if n_eff is None else min(max(n_eff, 2.0), n))
-    p_b = 0 if base is None else int(np.asarray(base).reshape(n, -1).shape[1])
-    g = n_eff if g is None else float(g)
+    groups, n, n_eff, p_b, g = _setup(X, y, groups, base, n_eff, g)
     return _eliminate(_Gram(X, y, base, None), groups, n_eff - p_b, g, margin)
 
 
@@ -200,12 +207,7 @@ def stability_selection(
     """Backward elimination on each resample of the rows (`resamples`: `(R, n)` integer
     indices, e.g. a moving-block bootstrap). Returns the frequency with which each group
     is kept `(n_groups,)` and the supports of every resample."""
-    groups = [[j] for j in range(np.shape(X)[1])] if groups is None else [list(gr) for gr in groups]
-    _check(X, y, groups)
-    n = np.size(y)
-    n_eff = float(n if n_eff is None else min(max(n_eff, 2.0), n))
-    p_b = 0 if base is None else int(np.asarray(base).reshape(n, -1).shape[1])
-    g = n_eff if g is None else float(g)
+    groups, n, n_eff, p_b, g = _setup(X, y, groups, base, n_eff, g)
     resamples = np.asarray(resamples)
     counts = np.zeros(len(groups))
     supports = []

@@ -92,21 +92,9 @@ class MultistartResult(eqx.Module):
     index: Int[Array, ""]
 
 
-def _multistart_impl(
-    params, static, data, residual, solver, spec, max_steps, covariance, confidence
-):
+def _multistart_impl(params, static, data, residual, solver, spec, settings):
     def one(p):
-        return _impl(
-            eqx.combine(p, static),
-            data,
-            residual,
-            solver,
-            spec,
-            max_steps,
-            covariance,
-            confidence,
-            False,
-        )
+        return _impl(eqx.combine(p, static), data, residual, solver, spec, *settings, False)
 
     starts = eqx.filter_vmap(one)(params)
     ok = starts.result == RESULTS.successful
@@ -175,9 +163,7 @@ def multistart(
         residual,
         solver,
         spec,
-        o.max_steps,
-        o.covariance,
-        o.confidence,
+        _solve_settings(o),
     )
     out = eqx.tree_at(lambda o: o.starts, out, _with_times(out.starts, times))
     out = eqx.tree_at(lambda o: o.best, out, _with_times(out.best, times))
@@ -267,9 +253,15 @@ def _n_positions(prepared: PyTree) -> int:
     return next(x.shape[0] for x in jax.tree_util.tree_leaves(prepared) if eqx.is_array(x))
 
 
-def _family_impl(model, data, residual, solver, spec, max_steps, covariance, confidence):
+def _solve_settings(o: SolveOptions) -> tuple[int, bool, float]:
+    """The options the compiled solve depends on (static): `(max_steps, covariance,
+    confidence)`."""
+    return o.max_steps, o.covariance, o.confidence
+
+
+def _family_impl(model, data, residual, solver, spec, settings):
     def one(m, d):
-        return _impl(m, d, residual, solver, spec, max_steps, covariance, confidence, False)
+        return _impl(m, d, residual, solver, spec, *settings, False)
 
     return eqx.filter_vmap(one, in_axes=(eqx.if_array(0), eqx.if_array(0)))(model, data)
 
@@ -392,9 +384,7 @@ def calibrate_family(
         residual,
         solver,
         spec,
-        o.max_steps,
-        o.covariance,
-        o.confidence,
+        _solve_settings(o),
     )
     out = _with_times(out, times)
     if o.throw:

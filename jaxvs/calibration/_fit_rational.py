@@ -151,7 +151,7 @@ def _as_order(order) -> tuple[int, int]:
     return nb, na
 
 
-@functools.partial(jax.jit, static_argnames=("nb", "na"))
+@functools.partial(jax.jit, static_argnames=("order",))
 def _fit_batch(
     omega: Float[Array, " freq"],
     hr: Float[Array, "batch freq"],
@@ -162,11 +162,11 @@ def _fit_batch(
     max_steps: Int[Array, ""],
     sk_steps: Int[Array, ""],
     rtol: Float[Array, ""],
-    nb: int,
-    na: int,
+    order: tuple[int, int],
 ):
-    # Only the orders (shapes) are static: options are traced, so changing them does
-    # not recompile.
+    # Only the orders `(nb, na)` (shapes) are static: options are traced, so changing
+    # them does not recompile.
+    nb, na = order
     n = na
     p = nb + 1 + na
     dtype = omega.dtype
@@ -567,8 +567,7 @@ def fit_rational(
         jnp.asarray(int(max_steps)),
         jnp.asarray(int(sk_steps)),
         jnp.asarray(float(rtol), jnp.float64),
-        nb,
-        na,
+        (nb, na),
     )
     if throw:
         num = _raise_if_failed(report.result, num)

@@ -2,9 +2,12 @@ r"""The one Levenberg-Marquardt of jaxvs: a kernel for ONE problem, a driver tha
 family of them, and the kernel as an optimistix least-squares solver.
 
 `calibrate` (through [`LevenbergMarquardt`][], an `optimistix.AbstractLeastSquaresSolver`),
-`fit_rational` (batched, with [`batched_while`][]), `fit_first_order`, the diagnosis and
-`train_lm` (with its structured Gauss-Newton matrix and trainlm's damping) all step with
-[`lm_step`][].
+`fit_rational` (batched, with [`batched_while`][]), the diagnosis and every other fit step
+with [`lm_step`][]; the loop around it is [`lm_solve`][] (one problem) or
+[`lm_solve_family`][] (a family, with work compaction): `fit_first_order`, the multiple
+shooting fit, the design search's networks (with early stopping, an
+[`AbstractLMMonitor`][]) and `train_lm` (trainlm's epochs: an `lm_solve` until a step is
+accepted, with its structured Gauss-Newton matrix and trainlm's damping).
 
 The problem enters only through its *normal equations*: `evaluate(θ, args)` returns the
 cost `½‖r‖²`, the Gauss-Newton matrix `JᵀJ` and the gradient `Jᵀr`. Problems with
@@ -363,6 +366,140 @@ def lm_result(state: LMState) -> RESULTS:
         RESULTS.nonfinite,
         RESULTS.where(state.converged, RESULTS.successful, RESULTS.max_steps_reached),
     )
+
+
+# ----------------------------------------------------------------------------- driver
+
+
+class AbstractLMMonitor(eqx.Module):
+    """What a fit watches beside the Levenberg-Marquardt iterate: a further stopping rule
+    (early stopping on validation data, the end of trainlm's epoch) and the quantities it
+    keeps (the best validated parameters). [`lm_solve`][] carries its state in the loop.
+    """
+
+    @abc.abstractmethod
+    def init(self, state: LMState, args: Any) -> PyTree:
+        """The monitor's state at the starting point."""
+
+    @abc.abstractmethod
+    def update(self, watch: PyTree, old: LMState, new: LMState, args: Any) -> PyTree:
+        """The monitor's state after the step from `old` to `new`."""
+
+    @abc.abstractmethod
+    def running(self, watch: PyTree, state: LMState, args: Any) -> Bool[Array, ""]:
+        """Whether the fit goes on (besides [`lm_running`][])."""
+
+
+class BatchSchedule(eqx.Module):
+    """The work compaction of [`batched_while`][] for a family of fits (heuristic: tune
+    it on the family's sizes; the results do not depend on it)."""
+
+    block: int = eqx.field(static=True, default=16)
+    first_steps: int = eqx.field(static=True, default=10)
+    tail_block: int = eqx.field(static=True, default=16)
+    block_steps: int = eqx.field(static=True, default=5)
+
+
+def _lm_loop(evaluate, feasible, rtol, damping, cost, monitor, max_steps):
+    def cond(carry, args):
+        state, watch = carry
+        go = lm_running(state, max_steps)
+        return go if monitor is None else go & monitor.running(watch, state, args)
+
+    def body(carry, args):
+        state, watch = carry
+        new = lm_step(evaluate, feasible, state, args, rtol, damping, cost=cost)
+        if monitor is not None:
+            watch = monitor.update(watch, state, new, args)
+        return new, watch
+
+    return cond, body
+
+
+def _lm_start(evaluate, theta0, args, rtol, mu0, monitor):
+    state = theta0 if isinstance(theta0, LMState) else lm_init(evaluate, theta0, args, rtol, mu0)
+    return state, (None if monitor is None else monitor.init(state, args))
+
+
+def lm_solve(
+    evaluate: Callable,
+    theta0: Float[Array, " p"] | LMState,
+    args: Any,
+    *,
+    max_steps: int,
+    rtol: float,
+    damping: AbstractDamping = NielsenDamping(),
+    feasible: Callable | None = None,
+    mu0: float = 1e-3,
+    cost: Callable | None = None,
+    monitor: AbstractLMMonitor | None = None,
+) -> LMState | tuple[LMState, PyTree]:
+    """Levenberg-Marquardt on one problem: [`lm_step`][] from `theta0` while
+    [`lm_running`][] (and `monitor.running`) holds, in one `jax.lax.while_loop`.
+
+    **Arguments:**
+
+    - `evaluate(θ, args) -> (½‖r‖², JᵀJ, Jᵀr)`: the normal equations (module doc;
+      [`jacobian_normal_equations`][] forms them from a residual).
+    - `theta0`: the flat starting parameters, or an [`LMState`][] to go on from (its
+      damping kept).
+    - `args`: the problem's data, passed to `evaluate`, `feasible`'s caller and `cost`.
+    - `max_steps`: the most trial steps; `rtol`: the relative tolerance of the stopping
+      rules (module doc).
+    - `damping`: [`NielsenDamping`][] (default) or [`MarquardtDamping`][].
+    - `feasible(θ) -> bool`: the open admissible set (default: everywhere).
+    - `mu0`: the initial damping (a fresh start only).
+    - `cost(θ, args) -> ½‖r‖²`: a cheaper cost judging the trials ([`lm_step`][]).
+    - `monitor`: an [`AbstractLMMonitor`][] with a further stopping rule.
+
+    **Returns:**
+
+    The final [`LMState`][] (its status by [`lm_result`][]); with a `monitor`, the pair
+    `(state, monitor state)`.
+    """
+    cond, body = _lm_loop(evaluate, feasible, rtol, damping, cost, monitor, max_steps)
+    carry = _lm_start(evaluate, theta0, args, rtol, mu0, monitor)
+    state, watch = jax.lax.while_loop(lambda c: cond(c, args), lambda c: body(c, args), carry)
+    return state if monitor is None else (state, watch)
+
+
+def lm_solve_family(
+    evaluate: Callable,
+    theta0: Float[Array, "member p"],
+    args: Any,
+    *,
+    max_steps: int,
+    rtol: float,
+    schedule: BatchSchedule = BatchSchedule(),
+    damping: AbstractDamping = NielsenDamping(),
+    feasible: Callable | None = None,
+    monitor: AbstractLMMonitor | None = None,
+) -> LMState | tuple[LMState, PyTree]:
+    """[`lm_solve`][] for a family of problems of one shape, with the work compaction of
+    [`batched_while`][] (`schedule`). `theta0` and the leaves of `args` carry the family
+    axis first; the results do too, each member's equal to its own [`lm_solve`][] (a
+    family of one runs exactly that)."""
+    cond, body = _lm_loop(evaluate, feasible, rtol, damping, None, monitor, max_steps)
+    carry = jax.vmap(lambda t, a: _lm_start(evaluate, t, a, rtol, 1e-3, monitor))(theta0, args)
+    if theta0.shape[0] == 1:
+        one = lambda x: x[0]
+        a0 = jax.tree_util.tree_map(one, args)
+        final = jax.lax.while_loop(
+            lambda c: cond(c, a0), lambda c: body(c, a0), jax.tree_util.tree_map(one, carry)
+        )
+        final = jax.tree_util.tree_map(lambda x: x[None], final)
+    else:
+        final = batched_while(
+            cond,
+            body,
+            carry,
+            args,
+            block=schedule.block,
+            first_steps=schedule.first_steps,
+            tail_block=schedule.tail_block,
+            block_steps=schedule.block_steps,
+        )
+    return final[0] if monitor is None else final
 
 
 # ----------------------------------------------------------------------------- optimistix

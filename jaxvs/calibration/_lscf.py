@@ -313,6 +313,25 @@ def _mac(a: Complex[Array, "... c"], b: Complex[Array, "... c"]) -> Float[Array,
     return num / jnp.where(den > 0, den, 1.0)
 
 
+class StabilisationCriteria(eqx.Module):
+    """When a pole counts as stable in the stabilisation diagram, and which tracks are
+    kept ([`modal_fit`][]).
+
+    **Fields:**
+
+    - `frequency_tol`, `damping_tol`: relative change to the previous order below which a
+      pole is stable (default 1 %, 5 %).
+    - `mac_tol`: lowest MAC with the previous pole's residue direction (default 0.98).
+    - `min_orders`: orders a track must be stable over to be kept (see
+      [`select_poles`][]; default there).
+    """
+
+    frequency_tol: float = 0.01
+    damping_tol: float = 0.05
+    mac_tol: float = 0.98
+    min_orders: int | None = None
+
+
 @eqx.filter_jit
 def _diagram_arrays(omega, H, W, p_max: int, freq_tol, damp_tol, mac_tol):
     dt = jnp.pi / omega[-1]

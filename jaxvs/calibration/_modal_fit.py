@@ -28,6 +28,7 @@ from jaxtyping import Array, ArrayLike, Complex, Float
 
 from ..models import ModalModel, RationalTF, frequency_response
 from ._lscf import (
+    StabilisationCriteria,
     StabilisationDiagram,
     _frfdata_arrays,
     prepare_frf,
@@ -328,10 +329,7 @@ def modal_fit(
     quantity: Quantity | None = None,
     unit: Literal["rad/s", "Hz"] = "rad/s",
     weights: ArrayLike | None = None,
-    frequency_tol: float = 0.01,
-    damping_tol: float = 0.05,
-    mac_tol: float = 0.98,
-    min_orders: int | None = None,
+    criteria: StabilisationCriteria | None = None,
     lower_residual: bool = True,
 ) -> ModalFit:
     """Modal parameters of measured FRFs: pLSCF poles, automatic selection, LSFD residues.
@@ -353,8 +351,8 @@ def modal_fit(
     - `unit`: `"rad/s"` or `"Hz"` for `omega` and `band`.
     - `weights`: `(freq,)` or `(freq, out)` weights for the pole estimator (default
       `1 / RMS|H_o|` per output) and the residue fit (default uniform).
-    - `frequency_tol`, `damping_tol`, `mac_tol`: stabilisation criteria (1 %, 5 %, 0.98).
-    - `min_orders`: see [`select_poles`][].
+    - `criteria`: the stabilisation and selection criteria ([`StabilisationCriteria`][];
+      default: 1 %, 5 %, MAC 0.98).
     - `lower_residual`: see [`lsfd`][] (`False`: `L = 0`, no rigid-body / out-of-band
       mass line).
 
@@ -365,6 +363,13 @@ def modal_fit(
     """
     where = "modal_fit"
     quantity = _resolve_quantity(quantity, omega, where)
+    if criteria is None:
+        criteria = StabilisationCriteria()
+    if not isinstance(criteria, StabilisationCriteria):
+        raise TypeError(
+            f"{where}: criteria must be a jaxvs.calibration.StabilisationCriteria; got "
+            f"{type(criteria).__name__}."
+        )
     diagram = stabilisation_diagram(
         omega,
         H,
@@ -372,11 +377,11 @@ def modal_fit(
         band=band,
         unit=unit,
         weights=weights,
-        frequency_tol=frequency_tol,
-        damping_tol=damping_tol,
-        mac_tol=mac_tol,
+        frequency_tol=criteria.frequency_tol,
+        damping_tol=criteria.damping_tol,
+        mac_tol=criteria.mac_tol,
     )
-    wn, ze = select_poles(diagram, n_modes=n_modes, min_orders=min_orders)
+    wn, ze = select_poles(diagram, n_modes=n_modes, min_orders=criteria.min_orders)
     return lsfd(
         omega,
         H,

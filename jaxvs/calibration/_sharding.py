@@ -39,7 +39,14 @@ from ._calibrate import (
     _failure_message,
     free_spec,
 )
-from ._family import _check_batched, _family_impl, _index, _n_positions, _prepare_family
+from ._family import (
+    _check_batched,
+    _family_impl,
+    _index,
+    _n_positions,
+    _prepare_family,
+    _solve_settings,
+)
 from ._parametrise import is_parameter
 from ._residuals import AbstractResidual
 from ._results import RESULTS
@@ -339,9 +346,7 @@ def calibrate_family_sharded(
         residual,
         solver,
         spec,
-        o.max_steps,
-        o.covariance,
-        o.confidence,
+        _solve_settings(o),
         mesh=mesh,
     )
     shape = out.stats["compile_time"].shape

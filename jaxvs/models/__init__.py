@@ -15,6 +15,7 @@ from ._discretise import (
     discretise as discretise,
 )
 from ._nonlinear_simulate import (
+    ODEOptions as ODEOptions,
     amplification as amplification,
     check_step as check_step,
     solve_ode as solve_ode,

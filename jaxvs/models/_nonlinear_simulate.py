@@ -30,6 +30,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
 __all__ = [
+    "ODEOptions",
     "amplification",
     "check_step",
     "finite_or_error",
@@ -72,6 +73,24 @@ def _solver(solver: Any, where: str) -> diffrax.AbstractSolver:
     return solver
 
 
+class ODEOptions(eqx.Module):
+    """The rarely changed settings of [`solve_ode`][].
+
+    **Fields:**
+
+    - `max_steps`: step budget; exceeding it is an error (stiff model, or a simulation
+      that diverges) unless `throw=False`.
+    - `adjoint`: differentiation through the solve; default `diffrax.ForwardMode()`
+      (forward-mode Jacobians, as `jaxvs.calibrate`'s Levenberg–Marquardt needs). Use
+      `diffrax.RecursiveCheckpointAdjoint()` for reverse-mode gradient methods.
+    - `jump_ts`: times where the inputs jump (the step controller restarts there).
+    """
+
+    max_steps: int = eqx.field(static=True, default=200_000)
+    adjoint: diffrax.AbstractAdjoint | None = None
+    jump_ts: Float[ArrayLike, " jump"] | None = None
+
+
 def solve_ode(
     vector_field: Callable[[Any, PyTree, Any], PyTree],
     y0: PyTree[ArrayLike],
@@ -82,10 +101,8 @@ def solve_ode(
     dt: float | None = None,
     rtol: float = 1e-7,
     atol: float = 1e-10,
-    max_steps: int = 200_000,
-    adjoint: diffrax.AbstractAdjoint | None = None,
-    jump_ts: Float[ArrayLike, " jump"] | None = None,
     throw: bool = True,
+    options: ODEOptions = ODEOptions(),
 ) -> PyTree[Float[Array, "time ..."]]:
     r"""Solve `y' = vector_field(t, y, args)` from `y(ts[0]) = y0` and return `y(ts)`.
 
@@ -100,14 +117,9 @@ def solve_ode(
     - `dt`: `None` for adaptive steps (PID control with `rtol`, `atol`), or a fixed step
       [s] (checked for stability with [`check_step`][] by the drive models).
     - `rtol`, `atol`: tolerances of the adaptive step-size controller.
-    - `max_steps`: step budget; exceeding it is an error (stiff model, or a simulation
-      that diverges) unless `throw=False`.
-    - `adjoint`: differentiation through the solve; default `diffrax.ForwardMode()`
-      (forward-mode Jacobians, as `jaxvs.calibrate`'s Levenberg–Marquardt needs). Use
-      `diffrax.RecursiveCheckpointAdjoint()` for reverse-mode gradient methods.
-    - `jump_ts`: times where the inputs jump (the step controller restarts there).
     - `throw`: raise on solver failure (also under `jit`); with `False` the failed
       samples are NaN.
+    - `options`: the step budget, the adjoint and the input jumps ([`ODEOptions`][]).
 
     **Returns:**
 
@@ -118,8 +130,11 @@ def solve_ode(
     ts = jnp.asarray(ts)
     if ts.ndim != 1 or ts.shape[0] < 2:
         raise ValueError(f"{where}: ts must be 1-D with >= 2 save times; got shape {ts.shape}.")
+    if not isinstance(options, ODEOptions):
+        raise TypeError(f"{where}: options must be a jaxvs.models.ODEOptions; got {options!r}.")
+    adjoint, max_steps = options.adjoint, options.max_steps
     if dt is None:
-        controller = diffrax.PIDController(rtol=rtol, atol=atol, jump_ts=jump_ts)
+        controller = diffrax.PIDController(rtol=rtol, atol=atol, jump_ts=options.jump_ts)
         dt0 = None
     else:
         if not dt > 0:

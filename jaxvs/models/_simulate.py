@@ -24,7 +24,7 @@ stay small, which measured about twice as fast as one pass over all lanes
 """
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -204,19 +204,34 @@ _MSG_OVERFLOW = (
 )
 
 
+class _Lanes(NamedTuple):
+    """Static layout of one engine call: whether the tables (`tab`) and the input (`u`)
+    carry a leading lane axis, the block length `k`, single-input and single-output
+    shapes."""
+
+    tab: bool
+    u: bool
+    k: int
+    siso_in: bool
+    siso_out: bool
+
+
+class _Reduction(NamedTuple):
+    """Reduce the output over time from sample `start` (`reduce`), against a target that
+    carries the lane axis when `t_lanes` (see `_reduce`)."""
+
+    reduce: bool = False
+    t_lanes: bool = False
+    start: int = 0
+
+
 def _run_group(
     tab: dict[str, Any],
     u: Array,
     s0: Array,
-    tab_lanes: bool,
-    u_lanes: bool,
-    k: int,
-    siso_in: bool,
-    siso_out: bool,
+    lanes: _Lanes,
     target: Array | None = None,
-    t_lanes: bool = False,
-    start: int = 0,
-    reduce: bool = False,
+    red: _Reduction = _Reduction(),
 ) -> Array:
     """Simulate one group of lanes.
 
@@ -227,6 +242,7 @@ def _run_group(
     output) or `(g, N, out)`. Raises (eqx.error_if) when the output is not finite; the input
     is only scanned for NaN/inf to word the message, i.e. off the fast path.
     """
+    tab_lanes, u_lanes, k, siso_in, siso_out = lanes
     n = u.shape[-1] if siso_in else u.shape[-2]
     m = 1 if siso_in else u.shape[-1]
     g = s0.shape[0]
@@ -255,8 +271,8 @@ def _run_group(
     )
     y = y.reshape(g, q * k) if siso_out else y.reshape(g, q * k, -1)
     y = y[:, :n] if q * k != n else y
-    if reduce:
-        return _reduce(y, target, t_lanes, start)
+    if red.reduce:
+        return _reduce(y, target, red.t_lanes, red.start)
     return y
 
 
@@ -299,92 +315,67 @@ def _engine(
     tab: dict[str, Any],
     u: Array,
     s0: Array,
-    tab_lanes: bool,
-    u_lanes: bool,
-    k: int,
-    siso_in: bool,
-    siso_out: bool,
+    lanes: _Lanes,
     target: Array | None = None,
-    t_lanes: bool = False,
-    start: int = 0,
-    reduce: bool = False,
+    red: _Reduction = _Reduction(),
 ) -> Array:
     """All lanes, in groups of `g` mapped with `jax.lax.map`.
 
-    `tab` leaves carry a leading lane axis when `tab_lanes`, `u` when `u_lanes`; `s0` always
-    has it. `g` is the largest divisor of the lane count below the cache target; for an
-    awkward count (e.g. a large prime) full groups are mapped and the rest run as one group.
+    `tab` leaves carry a leading lane axis when `lanes.tab`, `u` when `lanes.u`; `s0`
+    always has it. `g` is the largest divisor of the lane count below the cache target;
+    for an awkward count (e.g. a large prime) full groups are mapped and the rest run as
+    one group.
     """
     n_lanes = s0.shape[0]
-    n = u.shape[-1] if siso_in else u.shape[-2]
-    channels = (1 if siso_in else u.shape[-1]) + (tab["T"].shape[-1] // k)
-    args = (tab_lanes, u_lanes, k, siso_in, siso_out)
-    red = (t_lanes, start, reduce)
+    n = u.shape[-1] if lanes.siso_in else u.shape[-2]
+    channels = (1 if lanes.siso_in else u.shape[-1]) + (tab["T"].shape[-1] // lanes.k)
     per_group = _group_target(n_lanes, n, channels)
     g = next(d for d in range(per_group, 0, -1) if n_lanes % d == 0)
     if g == n_lanes:
-        return _run_group(tab, u, s0, *args, target, *red)
+        return _run_group(tab, u, s0, lanes, target, red)
     if 4 * g < per_group:
         n_main = (n_lanes // per_group) * per_group
-        head = _map_groups(tab, u, s0, per_group, n_main, *args, target, *red)
+        head = _map_groups(tab, u, s0, (per_group, n_main), lanes, target, red)
         rest = slice(n_main, n_lanes)
         tail = _run_group(
-            jax.tree_util.tree_map(lambda x: x[rest], tab) if tab_lanes else tab,
-            u[rest] if u_lanes else u,
+            jax.tree_util.tree_map(lambda x: x[rest], tab) if lanes.tab else tab,
+            u[rest] if lanes.u else u,
             s0[rest],
-            *args,
-            None if target is None else (target[rest] if t_lanes else target),
-            *red,
+            lanes,
+            None if target is None else (target[rest] if red.t_lanes else target),
+            red,
         )
         return jnp.concatenate([head, tail], axis=0)
-    return _map_groups(tab, u, s0, g, n_lanes, *args, target, *red)
+    return _map_groups(tab, u, s0, (g, n_lanes), lanes, target, red)
 
 
-def _map_groups(
-    tab,
-    u,
-    s0,
-    g,
-    n_used,
-    tab_lanes,
-    u_lanes,
-    k,
-    siso_in,
-    siso_out,
-    target=None,
-    t_lanes=False,
-    start=0,
-    reduce=False,
-):
-    """`jax.lax.map` over the first `n_used` lanes in groups of `g`."""
+def _map_groups(tab, u, s0, groups, lanes: _Lanes, target=None, red=_Reduction()):
+    """`jax.lax.map` over the first `n_used` lanes in groups of `g` (`groups = (g,
+    n_used)`)."""
+    g, n_used = groups
     n_groups = n_used // g
+    t_lanes = target is not None and red.t_lanes
 
     def split(x):
         x = x if x.shape[0] == n_used else x[:n_used]
         return x.reshape(n_groups, g, *x.shape[1:])
 
     xs: dict[str, Any] = {"s0": split(s0)}
-    if tab_lanes:
+    if lanes.tab:
         xs["tab"] = jax.tree_util.tree_map(split, tab)
-    if u_lanes:
+    if lanes.u:
         xs["u"] = split(u)
-    if target is not None and t_lanes:
+    if t_lanes:
         xs["target"] = split(target)
 
     def body(x):
         return _run_group(
-            x["tab"] if tab_lanes else tab,
-            x["u"] if u_lanes else u,
+            x["tab"] if lanes.tab else tab,
+            x["u"] if lanes.u else u,
             x["s0"],
-            tab_lanes,
-            u_lanes,
-            k,
-            siso_in,
-            siso_out,
-            x["target"] if (target is not None and t_lanes) else target,
-            t_lanes,
-            start,
-            reduce,
+            lanes,
+            x["target"] if t_lanes else target,
+            red,
         )
 
     y = jax.lax.map(body, xs)
@@ -564,12 +555,11 @@ def _simulate_flat(
     batch,
     u_lanes,
     config,
-    reduce=False,
     target=None,
-    t_lanes=False,
-    start=0,
+    red: _Reduction = _Reduction(),
 ):
-    """Discretise, build tables and run the engine on flattened lanes (jitted)."""
+    """Discretise, build tables and run the engine on flattened lanes (jitted); `red`:
+    reduce the output over time (against `target`) instead of returning it."""
     # NaN/inf parameters are named as such (not reported as an unstable model), and caught
     # where they reach only the output (a NaN residue leaves the states finite).
     params = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
@@ -629,9 +619,7 @@ def _simulate_flat(
     xi0 = x_modal - jnp.sum(rflat.b1 * u0[:, None, None, :], axis=-1)
     xi0 = jnp.broadcast_to(jnp.moveaxis(xi0, -1, -2), (n_lanes, 2, nb)).astype(cdt)
     target = None if target is None else target.astype(cdt)
-    return _engine(
-        tab, u, xi0, tab_lanes, u_lanes, k, siso_in, siso_out, target, t_lanes, start, reduce
-    )
+    return _engine(tab, u, xi0, _Lanes(tab_lanes, u_lanes, k, siso_in, siso_out), target, red)
 
 
 class SimulationMetrics(eqx.Module):
@@ -726,10 +714,8 @@ def simulate_metrics(
         batch,
         u_lanes,
         config,
-        True,
         target,
-        t_lanes,
-        int(start),
+        _Reduction(True, t_lanes, int(start)),
     )
     sums = sums.reshape(batch + sums.shape[1:])
     n = n_time - int(start)

@@ -246,6 +246,11 @@ def _segments(
     return _Segments(fs, n_time, nperseg, noverlap, int(nfft), n_segments, batch, axis, label)
 
 
+def _welch_segments(fn: str, n: int, batch, fs: float, windows, w: "Welch") -> _Segments:
+    """The segmentation of the options `w` for records of `n` samples."""
+    return _segments(fn, n, batch, fs, windows, w.nperseg, w.noverlap, w.nfft, w.df, w.records_axis)
+
+
 def _window_array(window, seg: _Segments, dtype, fn: str) -> Array:
     if isinstance(window, str):
         return get_window(window, seg.nperseg, dtype=dtype)
@@ -449,14 +454,9 @@ def csd(
     y: Float[ArrayLike, "*batch time"],
     fs: RealScalarLike,
     *,
-    window: str | Float[ArrayLike, "*batch nperseg"] = "hann",
-    nperseg: int | None = None,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    df: float | None = None,
-    detrend: Detrend = "constant",
+    welch: "Welch | None" = None,
     scaling: Literal["density", "spectrum"] = "density",
-    records_axis: int | None = None,
+    **options: Any,
 ) -> tuple[Float[Array, " freq"], Complex[Array, "*batch freq"]]:
     """One-sided cross power spectral density `P_xy = E[conj(X)·Y]` by Welch's method.
 
@@ -468,6 +468,8 @@ def csd(
     - `x`, `y`: `(*batch, time)` real records of equal length on one time base; leading
       axes broadcast.
     - `fs`: sampling rate [Hz], a concrete number (static under `jax.jit`).
+    - `welch`: the averaging options as one [`Welch`][], or its fields as keywords (as
+      `scipy.signal.csd`):
     - `window`: `"hann"` (default), `"hamming"`, `"boxcar"`, `"flattop"`, or the samples
       `(nperseg,)` / `(*batch, nperseg)` (e.g. from [`exponential_window`][]).
     - `nperseg`: segment length [samples]; default 256, the window's length, or the whole
@@ -477,8 +479,8 @@ def csd(
     - `df`: alternative to `nperseg`: the frequency resolution wanted [Hz]
       (`nperseg = ceil(fs / df)`).
     - `detrend`: per segment, `"constant"` (remove the mean, default), `"linear"`, or `None`.
-    - `scaling`: `"density"` [unit²/Hz] or `"spectrum"` [unit²].
     - `records_axis`: a leading axis holding repeated records, averaged as well.
+    - `scaling`: `"density"` [unit²/Hz] or `"spectrum"` [unit²].
 
     **Returns:**
 
@@ -492,10 +494,11 @@ def csd(
     signals or a traced `fs`.
     """
     fn = "csd"
-    scaling, detrend_kind = _welch_options(fn, scaling, detrend)
-    wx, _ = _split_window(window, False, fn)
+    w = options_object(Welch, welch, options, fn, "welch")
+    scaling, detrend_kind = _welch_options(fn, scaling, w.detrend)
+    wx, _ = _split_window(w.window, False, fn)
     fs, x, y, batch = _prepare_pair(x, y, fs, fn)
-    seg = _segments(fn, x.shape[-1], batch, fs, (wx,), nperseg, noverlap, nfft, df, records_axis)
+    seg = _welch_segments(fn, x.shape[-1], batch, fs, (wx,), w)
     x = _check_finite(x, "x", fn)
     y = _check_finite(y, "y", fn)
     w = _window_array(wx, seg, x.dtype, fn)
@@ -506,14 +509,9 @@ def psd(
     x: Float[ArrayLike, "*batch time"],
     fs: RealScalarLike,
     *,
-    window: str | Float[ArrayLike, "*batch nperseg"] = "hann",
-    nperseg: int | None = None,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    df: float | None = None,
-    detrend: Detrend = "constant",
+    welch: "Welch | None" = None,
     scaling: Literal["density", "spectrum"] = "density",
-    records_axis: int | None = None,
+    **options: Any,
 ) -> tuple[Float[Array, " freq"], Float[Array, "*batch freq"]]:
     """One-sided (auto) power spectral density by Welch's method, as `scipy.signal.welch`.
 
@@ -525,12 +523,13 @@ def psd(
     [unit²/Hz] (or power spectrum [unit²] with `scaling="spectrum"`).
     """
     fn = "psd"
-    scaling, detrend_kind = _welch_options(fn, scaling, detrend)
-    wx, _ = _split_window(window, False, fn)
+    w = options_object(Welch, welch, options, fn, "welch")
+    scaling, detrend_kind = _welch_options(fn, scaling, w.detrend)
+    wx, _ = _split_window(w.window, False, fn)
     fs = _sampling_rate(fs, fn)
     x = _as_signal(x, "x", fn)
     batch = tuple(x.shape[:-1])
-    seg = _segments(fn, x.shape[-1], batch, fs, (wx,), nperseg, noverlap, nfft, df, records_axis)
+    seg = _welch_segments(fn, x.shape[-1], batch, fs, (wx,), w)
     x = _check_finite(x, "x", fn)
     w = _window_array(wx, seg, x.dtype, fn)
     return jnp.asarray(_frequencies(seg)), _psd_core(x, w, seg, detrend_kind, scaling)
@@ -551,9 +550,7 @@ def _ratio_inputs(fn: str, x, y, fs, welch: "Welch", names) -> _RatioInputs:
     detrend_kind = _detrend_kind(w.detrend, fn)
     wx, wy = _split_window(w.window, True, fn)
     fs, x, y, batch = _prepare_pair(x, y, fs, fn, names=names)
-    seg = _segments(
-        fn, x.shape[-1], batch, fs, (wx, wy), w.nperseg, w.noverlap, w.nfft, w.df, w.records_axis
-    )
+    seg = _welch_segments(fn, x.shape[-1], batch, fs, (wx, wy), w)
     x = _check_finite(x, names[0], fn)
     y = _check_finite(y, names[1], fn)
     x = _check_exciting(x, names[0], "input", seg.records_axis, fn)
@@ -699,8 +696,8 @@ the value checks are `eqx.error_if`.
 
 @dataclasses.dataclass(frozen=True)
 class Welch:
-    """Welch averaging options of the FRF estimators (`frf_h1`, `frf_h2`, `frf_hv`) and of
-    `transmissibility`, as one
+    """Welch averaging options of the spectra (`csd`, `psd`), the FRF estimators
+    (`frf_h1`, `frf_h2`, `frf_hv`) and `transmissibility`, as one
     frozen object that can be built once and passed to several estimates.
 
     **Fields:** `window` (a name / samples shared by both channels, or a pair

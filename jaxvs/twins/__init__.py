@@ -6,6 +6,7 @@ Only tests, benchmarks, notebooks and the CLI demo import this package.
 from ._drive import (
     DRIVE_EFFECT_LABELS as DRIVE_EFFECT_LABELS,
     DRIVE_TWIN_EFFECTS as DRIVE_TWIN_EFFECTS,
+    DriveLoop as DriveLoop,
     DriveTwin as DriveTwin,
     draw_drive_effect as draw_drive_effect,
     drive_reference as drive_reference,
@@ -13,8 +14,10 @@ from ._drive import (
 from ._structure import (
     TMF_TWIN_EFFECTS as TMF_TWIN_EFFECTS,
     ImpactData as ImpactData,
+    ImpactSensors as ImpactSensors,
     MachineStructureTwin as MachineStructureTwin,
     StructureData as StructureData,
+    TMFSensors as TMFSensors,
     draw_tmf_effect as draw_tmf_effect,
 )
 from ._thermal import (

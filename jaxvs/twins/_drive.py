@@ -47,6 +47,7 @@ import jax.random as jr
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
+from .._misc import options_object
 from ..data import Record
 
 # Stream identifiers for `jr.fold_in`: every random quantity has its own stream, so that
@@ -332,6 +333,23 @@ def _pulse_train(key, t, amplitude, n_pulses, width, rise, duration):
     return amplitude * jnp.sum(signs * shape, axis=-1)
 
 
+@dataclasses.dataclass(frozen=True)
+class DriveLoop:
+    """The controller and sensor settings of a [`DriveTwin`][] (the EMPS loop): the
+    position gain `kp` [1/s], velocity gain `kv` [V/(m/s)] and force constant `gtau` [N/V],
+    the encoder `resolution` [m], the velocity filter's `velocity_cutoff` [Hz], the
+    amplifier `saturation` [V] (`None`: none) and the simulation steps per sample
+    `oversample`."""
+
+    kp: float = 160.18
+    kv: float = 243.45
+    gtau: float = 35.15
+    resolution: float = 1e-7
+    velocity_cutoff: float = 200.0
+    saturation: float | None = None
+    oversample: int = 10
+
+
 class DriveTwin(eqx.Module):
     """EMPS-like closed-loop prismatic axis with switchable hidden effects (the "real
     plant" of the drive family).
@@ -343,11 +361,13 @@ class DriveTwin(eqx.Module):
     - `offset`: constant offset force [N] (EMPS: −3.16 N); it enters as `… + offset = F`.
     - `motor_mass`: motor-side mass `Mm` [kg]; the load is `ML = M − Mm`. Only matters
         when a coupling effect (`backlash`, `resonance`) separates the two.
-    - `kp` [1/s], `kv` [V/(m/s)], `gtau` [N/V]: EMPS controller gains.
-    - `resolution`: encoder quantisation step [m] (0 = none).
-    - `velocity_cutoff`: cut-off of the drive's first-order velocity filter [Hz].
-    - `saturation`: controller output limit [V] (`None` = no saturation).
-    - `oversample`: integration substeps per sample.
+    - `loop`: the controller and sensor settings, a [`DriveLoop`][], or its fields as
+      keywords:
+        - `kp` [1/s], `kv` [V/(m/s)], `gtau` [N/V]: EMPS controller gains.
+        - `resolution`: encoder quantisation step [m] (0 = none).
+        - `velocity_cutoff`: cut-off of the drive's first-order velocity filter [Hz].
+        - `saturation`: controller output limit [V] (`None` = no saturation).
+        - `oversample`: integration substeps per sample.
     - `effects`: dict effect -> dict of parameters (missing parameters take the defaults
         given here); all effects are off by default and then contribute exactly nothing:
         - `"lugre"`: LuGre friction on the load (Canudas de Wit et al. 1995, IEEE TAC 40(3)),
@@ -410,15 +430,15 @@ class DriveTwin(eqx.Module):
         offset: float = -3.0,
         *,
         motor_mass: float = 30.0,
-        kp: float = 160.18,
-        kv: float = 243.45,
-        gtau: float = 35.15,
-        resolution: float = 1e-7,
-        velocity_cutoff: float = 200.0,
-        saturation: float | None = None,
-        oversample: int = 10,
         effects: Mapping[str, Mapping[str, Any]] | None = None,
+        loop: DriveLoop | None = None,
+        **keywords: Any,
     ):
+        # The controller and sensor settings: a DriveLoop, or its fields as keywords.
+        loop = options_object(DriveLoop, loop, keywords, "DriveTwin", "loop")
+        kp, kv, gtau = loop.kp, loop.kv, loop.gtau
+        resolution, velocity_cutoff = loop.resolution, loop.velocity_cutoff
+        saturation, oversample = loop.saturation, loop.oversample
         for name, value in (
             ("M", M),
             ("Fv", Fv),

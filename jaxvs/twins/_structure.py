@@ -18,6 +18,7 @@ sim-to-real diagnosis; each is exactly off at zero, where the encoder-to-TCP mot
 one position-independent rational TMF of order (2, 4) (padded: 4/4).
 """
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from typing import Any, NamedTuple
@@ -30,6 +31,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 from scipy.signal import butter
 
+from .._misc import options_object
 from ..data import Record, prbs
 from ..models import OscillatorChain, RationalTF, StateSpace, simulate
 
@@ -224,6 +226,32 @@ def draw_tmf_effect(key: PRNGKeyArray, label: str | None) -> dict[str, Any]:
     if label == "sensor_delay":
         return {label: lerp(0, 2e-3, 5e-3)}
     return {label: {"amplitude": lerp(0, 50.0, 500.0), "tooth_pass_hz": lerp(1, 40.0, 150.0)}}
+
+
+@dataclasses.dataclass(frozen=True)
+class ImpactSensors:
+    """The sensors of [`MachineStructureTwin.impact_experiment`][]: force-sensor noise
+    `force_noise` [N], accelerometer noise `accel_noise` [m/s²], high-pass
+    `accel_highpass_hz` [Hz] and bandwidth `accel_bandwidth_hz` [Hz] (`None`: unlimited),
+    and the simulation steps per sample `oversample`."""
+
+    force_noise: float = 0.5
+    accel_noise: float = 0.02
+    accel_highpass_hz: float = 2.0
+    accel_bandwidth_hz: float | None = None
+    oversample: int = 8
+
+
+@dataclasses.dataclass(frozen=True)
+class TMFSensors:
+    """The sensors of [`MachineStructureTwin.tmf_experiment`][]: the reference TCP
+    sensor's noise `noise` [m], the linear encoder's `encoder_resolution` [m], the force
+    sensor's noise `force_noise` [N], and the simulation steps per sample `oversample`."""
+
+    noise: float = 5e-8
+    encoder_resolution: float = 1e-7
+    force_noise: float = 2.0
+    oversample: int = 16
 
 
 class MachineStructureTwin(eqx.Module):
@@ -492,11 +520,8 @@ class MachineStructureTwin(eqx.Module):
         record_length: float = 2.0,
         hit_duration: float = 1.5e-3,
         force_peak: float = 2000.0,
-        force_noise: float = 0.5,
-        accel_noise: float = 0.02,
-        accel_highpass_hz: float = 2.0,
-        accel_bandwidth_hz: float | None = None,
-        oversample: int = 8,
+        sensors: ImpactSensors | None = None,
+        **keywords: Any,
     ) -> ImpactData:
         """Impact-hammer test at the encoder or at the TCP, at every Y position.
 
@@ -515,12 +540,18 @@ class MachineStructureTwin(eqx.Module):
         - `y`: `(position,)` Y positions [m]; `key`: PRNG key.
         - `location`: `"encoder"` or `"tcp"`.
         - `n_hits`, `fs` [Hz], `record_length` [s]: repeated records for averaging.
-        - `hit_duration` [s], `force_peak` [N], `force_noise` [N]: the hammer.
-        - `accel_noise` [m/s²], `accel_highpass_hz` [Hz], `accel_bandwidth_hz` [Hz].
-        - `oversample`: internal simulation steps per sample.
+        - `hit_duration` [s], `force_peak` [N]: the hammer.
+        - `sensors`: an [`ImpactSensors`][], or its fields as keywords: `force_noise` [N],
+          `accel_noise` [m/s²], `accel_highpass_hz` [Hz], `accel_bandwidth_hz` [Hz],
+          `oversample` (internal simulation steps per sample).
 
         **Returns:** an [`ImpactData`][].
         """
+        sensors = options_object(ImpactSensors, sensors, keywords, "impact_experiment", "sensors")
+        force_noise, accel_noise = sensors.force_noise, sensors.accel_noise
+        accel_highpass_hz = sensors.accel_highpass_hz
+        accel_bandwidth_hz = sensors.accel_bandwidth_hz
+        oversample = sensors.oversample
         if location not in ("encoder", "tcp"):
             raise ValueError(f"impact_experiment: location={location!r}; use 'encoder' or 'tcp'.")
         y = np.atleast_1d(np.asarray(y, float))
@@ -579,12 +610,9 @@ class MachineStructureTwin(eqx.Module):
         servo_cycle: float | None = None,
         command_amplitude: float = 2e-5,
         emphasis: float = 3.0,
-        noise: float = 5e-8,
-        encoder_resolution: float = 1e-7,
-        force_noise: float = 2.0,
-        oversample: int = 16,
         command: ArrayLike | None = None,
         return_truth: bool = False,
+        **sensors: Any,
     ) -> list[Record] | tuple[list[Record], dict[str, np.ndarray]]:
         """Diagnosis data of the `tmf` family: one record per Y position (docs/guides/contracts.md).
 
@@ -613,21 +641,25 @@ class MachineStructureTwin(eqx.Module):
         - `servo_cycle`: hold time of the command [s], a multiple of `dt` (default `dt`).
         - `command_amplitude`: amplitude `A` of the commanded-position sequence [m].
         - `emphasis`: pre-emphasis of the command [-] (0: a plain binary sequence).
-        - `noise`: standard deviation of the reference TCP sensor noise [m].
-        - `encoder_resolution`: quantisation step of the linear encoder [m].
-        - `force_noise`: standard deviation of the force-sensor noise [N].
-        - `oversample`: internal simulation steps per sample.
         - `command`: optional commanded position [m], `(time,)` or `(position, time)`
           sampled every `dt`, replacing the random sequence (e.g. a dynamic test cycle);
           `duration` is then its length.
         - `return_truth`: also return a dict with the noiseless, undelayed `x_t`
           (`"x_t_true"`, `(position, time)`), the encoder position before quantisation
           (`"x_e_true"`) and the actual force (`"f_true"`).
+        - the fields of [`TMFSensors`][] as keywords (defaults there): `noise` (standard
+          deviation of the reference TCP sensor noise [m]), `encoder_resolution`
+          (quantisation step of the linear encoder [m]), `force_noise` (standard deviation
+          of the force-sensor noise [N]), `oversample` (internal simulation steps per
+          sample).
 
         **Returns:**
 
         A list of `jaxvs.data.Record`, one per Y position (and the truth, see above).
         """
+        sensors = options_object(TMFSensors, None, sensors, "tmf_experiment", "sensors")
+        noise, encoder_resolution = sensors.noise, sensors.encoder_resolution
+        force_noise, oversample = sensors.force_noise, sensors.oversample
         ys = np.atleast_1d(np.asarray(ys, float))
         if ys.ndim != 1 or ys.size == 0 or not np.all(np.isfinite(ys)):
             raise ValueError(
@@ -751,7 +783,9 @@ __all__ = [
     "TCP",
     "TMF_TWIN_EFFECTS",
     "ImpactData",
+    "ImpactSensors",
     "MachineStructureTwin",
     "StructureData",
+    "TMFSensors",
     "draw_tmf_effect",
 ]

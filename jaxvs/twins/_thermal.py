@@ -286,6 +286,36 @@ def _triangle(phase: Array, duty: Array) -> Array:
     return jnp.where(s < duty, -1.0 + 2.0 * s / duty, 1.0 - 2.0 * (s - duty) / (1.0 - duty))
 
 
+# The default physical parameters of `SpindleThermalTwin` (units in its docstring).
+_NOMINAL: dict[str, Any] = dict(
+    T_air0=21.0,
+    T_water0=20.0,
+    P_bearing=320.0,
+    n_ref=5000.0,
+    G_bc=5.0,
+    G_bw=8.0,
+    G_ba=7.0,
+    C_chassis=1.2e5,
+    G_cw=40.0,
+    G_ca=6.0,
+    P_motor=(30.0, 150.0, 100.0),
+    C_motor=2.0e4,
+    G_mcm=25.0,
+    C_chassis_m=6.0e4,
+    G_cmw=20.0,
+    G_cma=5.0,
+    G_mc=5.0,
+    C_flange=2.0e4,
+    G_fc=8.0,
+    G_fa=3.0,
+    G_fb=4.0,
+    C_shaft=3.0e4,
+    G_sb=15.0,
+    G_sa=3.0,
+    G_sm=5.0,
+)
+
+
 class SpindleThermalTwin(eqx.Module):
     """Lumped thermal network of a water-cooled motor spindle with switchable effects.
 
@@ -348,64 +378,20 @@ class SpindleThermalTwin(eqx.Module):
     alpha: Float[Array, ""]
     n_ref: float = eqx.field(static=True)
 
-    def __init__(
-        self,
-        effects: Mapping[str, float] | None = None,
-        *,
-        T_air0: float = 21.0,
-        T_water0: float = 20.0,
-        P_bearing: float = 320.0,
-        n_ref: float = 5000.0,
-        G_bc: float = 5.0,
-        G_bw: float = 8.0,
-        G_ba: float = 7.0,
-        C_chassis: float = 1.2e5,
-        G_cw: float = 40.0,
-        G_ca: float = 6.0,
-        P_motor: ArrayLike = (30.0, 150.0, 100.0),
-        C_motor: float = 2.0e4,
-        G_mcm: float = 25.0,
-        C_chassis_m: float = 6.0e4,
-        G_cmw: float = 20.0,
-        G_cma: float = 5.0,
-        G_mc: float = 5.0,
-        C_flange: float = 2.0e4,
-        G_fc: float = 8.0,
-        G_fa: float = 3.0,
-        G_fb: float = 4.0,
-        C_shaft: float = 3.0e4,
-        G_sb: float = 15.0,
-        G_sa: float = 3.0,
-        G_sm: float = 5.0,
-    ):
+    def __init__(self, effects: Mapping[str, float] | None = None, **parameters: ArrayLike):
+        # The physical parameters are keywords with the defaults of `_NOMINAL` (the class
+        # docstring lists them); an unknown name is refused.
+        unknown = sorted(set(parameters) - set(_NOMINAL))
+        if unknown:
+            raise TypeError(
+                f"SpindleThermalTwin: unknown parameter(s) {unknown}; the parameters are "
+                f"{sorted(_NOMINAL)}."
+            )
+        p = {**_NOMINAL, **parameters}
         eff = _effects_dict(effects)
         f = jnp.result_type(float)
-        scalars = dict(
-            T_air0=T_air0,
-            T_water0=T_water0,
-            P_bearing=P_bearing,
-            G_bc=G_bc,
-            G_bw=G_bw,
-            G_ba=G_ba,
-            C_chassis=C_chassis,
-            G_cw=G_cw,
-            G_ca=G_ca,
-            C_motor=C_motor,
-            G_mcm=G_mcm,
-            C_chassis_m=C_chassis_m,
-            G_cmw=G_cmw,
-            G_cma=G_cma,
-            G_mc=G_mc,
-            C_flange=C_flange,
-            G_fc=G_fc,
-            G_fa=G_fa,
-            G_fb=G_fb,
-            C_shaft=C_shaft,
-            G_sb=G_sb,
-            G_sa=G_sa,
-            G_sm=G_sm,
-        )
-        for name, value in scalars.items():
+        P_motor, n_ref = p.pop("P_motor"), p.pop("n_ref")
+        for name, value in p.items():
             v = jnp.asarray(value, f)
             if v.shape != ():
                 raise ValueError(f"SpindleThermalTwin: {name} must be a scalar, got {v.shape}.")

@@ -39,6 +39,7 @@ from jaxtyping import Array, ArrayLike, Float
 from ..._misc import as_real, check_physical, is_traced
 from .._base import AbstractModel, check_parameters
 from .._nonlinear_simulate import (
+    ODEOptions,
     check_step,
     finite_or_error,
     solve_ode,
@@ -695,8 +696,8 @@ def _simulate(drive, r, fe, ua, y0, dt, solver, rtol, atol, max_steps):
             solver=solver,
             rtol=rtol,
             atol=atol,
-            max_steps=max_steps,
             throw=True,
+            options=ODEOptions(max_steps=max_steps),
         )
         dys = jax.vmap(lambda t, y: drive._continuous(t, y, (ts, r, fe, ua)))(ts, ys)
 

@@ -11,6 +11,7 @@ from ._emps import (
 )
 from ._shooting import (
     AbstractSimulator as AbstractSimulator,
+    ShootingOptions as ShootingOptions,
     ShootingResult as ShootingResult,
     fit_multiple_shooting as fit_multiple_shooting,
 )

@@ -14,8 +14,8 @@ adds a continuity residual between the end of segment `s` and the start of `s + 
                      + ρ² Σ_{s<S} ‖(x_s^end(θ, x_s) − x_{s+1}) / σ_x‖².
 
 Each segment is short, so the cost is smooth; the continuity term ties the segments into
-one trajectory as `ρ` grows. The Levenberg–Marquardt kernel of `jaxvs.calibration`
-(`lm_init` / `lm_step`) solves it from its normal equations; the Jacobian is built per
+one trajectory as `ρ` grows. The one Levenberg–Marquardt of `jaxvs.calibration`
+(`lm_solve`) solves it from its normal equations; the Jacobian is built per
 segment (forward mode, `p + n_x` directions on `L` samples each) and assembled in its
 block structure, so a step costs `O(S·L·(p + n_x))` simulations steps instead of
 `O(S·L·(p + S·n_x))`.
@@ -24,6 +24,7 @@ block structure, so a step costs `O(S·L·(p + n_x))` simulations steps instead 
 from __future__ import annotations
 
 import abc
+import dataclasses
 import time
 from collections.abc import Callable
 from typing import Any
@@ -35,9 +36,10 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from ...calibration import RESULTS, free_spec, lm_init, lm_result, lm_running, lm_step
+from ..._misc import options_object
+from ...calibration import RESULTS, free_spec, lm_init, lm_result, lm_solve
 
-__all__ = ["AbstractSimulator", "ShootingResult", "fit_multiple_shooting"]
+__all__ = ["AbstractSimulator", "ShootingOptions", "ShootingResult", "fit_multiple_shooting"]
 
 
 class AbstractSimulator(eqx.Module):
@@ -118,23 +120,48 @@ class ShootingResult(eqx.Module):
     run_s: float = eqx.field(static=True)
 
 
+@dataclasses.dataclass(frozen=True)
+class ShootingOptions:
+    """The segmentation, scaling and solver settings of [`fit_multiple_shooting`][].
+
+    **Fields:**
+
+    - `segment_length`: samples per segment `L` (>= 2); the number of segments is
+      `(time − init_window) // L`, the remaining samples at the end are not used.
+    - `init_window`: output samples used by each segment's initial-state guess (>= 1).
+    - `output_scale`: `σ_y`, the output error that counts as 1 (e.g. 1e-3 m: residuals
+      in mm), a scalar or one per output.
+    - `state_scale`: `σ_x`, the state mismatch that counts as 1 at a segment joint (a
+      scalar or one per state; default `output_scale` for every state).
+    - `continuity`: `ρ`, the weight of the continuity residuals (> 0).
+    - `free_states`: calibrate the segments' initial states (multiple shooting); with
+      `False` they stay at their `initial_state` estimates. One segment with fixed state
+      is plain free-run (single-shooting) output error, exactly the benchmark protocol
+      (`segment_length = time − init_window`).
+    - `max_steps`, `rtol`: Levenberg–Marquardt budget and relative tolerance.
+    """
+
+    segment_length: int = 1000
+    init_window: int = 20
+    output_scale: Any = 1.0
+    state_scale: Any = None
+    continuity: float = 1.0
+    free_states: bool = True
+    max_steps: int = 100
+    rtol: float = 1e-8
+
+
 def fit_multiple_shooting(
     model: AbstractSimulator,
     u: Float[ArrayLike, "time input"],
     y: Float[ArrayLike, "time output"],
     *,
-    segment_length: int = 1000,
-    init_window: int = 20,
     free: Any = None,
-    output_scale: float | Float[ArrayLike, " output"] = 1.0,
-    state_scale: float | Float[ArrayLike, " state"] | None = None,
-    continuity: float = 1.0,
-    free_states: bool = True,
     feasible: Callable[[Any], Any] | None = None,
-    max_steps: int = 100,
-    rtol: float = 1e-8,
-    throw: bool = True,
     weights: Float[ArrayLike, " time"] | None = None,
+    throw: bool = True,
+    options: ShootingOptions | None = None,
+    **keywords: Any,
 ) -> ShootingResult:
     r"""Calibrate a simulator on one record by multiple-shooting simulation error.
 
@@ -148,29 +175,18 @@ def fit_multiple_shooting(
 
     - `model`: an [`AbstractSimulator`][], the initial guess.
     - `u`, `y`: `(time, input)` input and `(time, output)` measured output.
-    - `segment_length`: samples per segment `L` (>= 2); the number of segments is
-      `(time − init_window) // L`, the remaining samples at the end are not used.
-    - `init_window`: output samples used by each segment's initial-state guess (>= 1).
     - `free`: which leaves of `model` are calibrated, as for `jaxvs.calibrate`
       (`None` = every floating-point array; a where-function; a filter spec).
-    - `output_scale`: `σ_y`, the output error that counts as 1 (e.g. 1e-3 m: residuals
-      in mm), a scalar or one per output.
-    - `state_scale`: `σ_x`, the state mismatch that counts as 1 at a segment joint (a
-      scalar or one per state; default `output_scale` for every state).
-    - `continuity`: `ρ`, the weight of the continuity residuals (> 0).
-    - `free_states`: calibrate the segments' initial states (multiple shooting); with
-      `False` they stay at their `initial_state` estimates. One segment with fixed state
-      is plain free-run (single-shooting) output error, exactly the benchmark protocol
-      (`segment_length = time − init_window`).
     - `feasible`: optional predicate `model -> bool` (a traced boolean) of admissible
       parameters (e.g. a positive mass); a step that leaves it is shortened.
-    - `max_steps`, `rtol`: Levenberg–Marquardt budget and relative tolerance.
-    - `throw`: raise `RuntimeError` when the solve ends with NaN (non-convergence within
-      `max_steps` is reported in `result`, not raised).
     - `weights`: optional `(time,)` weights `>= 0` of the output residuals (default 1).
       A zero weight takes a sample out of the fit while the simulation still runs through
       it: hold out a span of the record (cross-validation) and let the states evolve
       over it as they would in a free run.
+    - `throw`: raise `RuntimeError` when the solve ends with NaN (non-convergence within
+      `max_steps` is reported in `result`, not raised).
+    - `options`: the segmentation, scaling and solver settings, a [`ShootingOptions`][],
+      or its fields as keywords (`segment_length=400`, ...).
 
     **Returns:**
 
@@ -182,6 +198,10 @@ def fit_multiple_shooting(
     when the simulation becomes NaN and `throw=True`.
     """
     where = "fit_multiple_shooting"
+    o = options_object(ShootingOptions, options, keywords, where)
+    segment_length, init_window, continuity = o.segment_length, o.init_window, o.continuity
+    output_scale, state_scale, free_states = o.output_scale, o.state_scale, o.free_states
+    max_steps, rtol = o.max_steps, o.rtol
     if not isinstance(model, AbstractSimulator):
         raise TypeError(f"{where}: model must be an AbstractSimulator; got {type(model).__name__}.")
     u = jnp.asarray(u, dtype=float)
@@ -311,11 +331,7 @@ def fit_multiple_shooting(
         args = (us, ys, ws, fixed)
         state = lm_init(evaluate, z0, args, rtol)
         initial = state.cost
-        state = jax.lax.while_loop(
-            lambda s: lm_running(s, max_steps),
-            lambda s: lm_step(evaluate, feasible_z, s, args, rtol),
-            state,
-        )
+        state = lm_solve(evaluate, state, args, max_steps=max_steps, rtol=rtol, feasible=feasible_z)
         return state, initial
 
     start = time.perf_counter()

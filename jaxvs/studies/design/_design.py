@@ -36,6 +36,7 @@ from ._score import rank_designs, residual_checks
 from ._search import (
     Candidate,
     GroupResult,
+    NetworkTraining,
     fit_linear_group,
     perceptron_from,
     train_network_group,
@@ -309,22 +310,16 @@ def design(
                     cands = cands[: max(fit, 0)]
                     if not cands:
                         break
+            net = (X, yn, role, n_pool, dmax)
+            net_kw = dict(
+                inits=inits, key=jr.fold_in(key, gi), training=NetworkTraining(max_steps=max_steps)
+            )
+            lin = (X, yn, starts, T.astype(float), n_pool, dmax, dt)
             if is_net:
-                res: GroupResult = train_network_group(
-                    cands,
-                    X,
-                    yn,
-                    role,
-                    n_pool,
-                    dmax,
-                    inits=inits,
-                    key=jr.fold_in(key, gi),
-                    max_steps=max_steps,
-                )
+                res: GroupResult = train_network_group(cands, *net, **net_kw)
                 h = cands[0].hidden
                 rate = (res.run_seconds + res.compile_seconds) / (res.members * h * (h + 1) / 2)
             else:
-                lin = (X, yn, starts, T.astype(float), n_pool, dmax, dt)
                 res = fit_linear_group(gname, cands, *lin)
                 if compare_loop:  # run again: the first call included the compilation
                     again = fit_linear_group(gname, cands, *lin)
@@ -340,24 +335,7 @@ def design(
                 "compile_s": res.compile_seconds,
             }
             if compare_loop:
-                entry.update(
-                    _loop_reference(
-                        gname,
-                        cands,
-                        X,
-                        yn,
-                        role,
-                        starts,
-                        T,
-                        n_pool,
-                        dmax,
-                        dt,
-                        inits,
-                        jr.fold_in(key, gi),
-                        max_steps,
-                        res,
-                    )
-                )
+                entry.update(_loop_reference(gname, cands, res, (net, net_kw), lin))
             timing.append(entry)
             per_c = (res.run_seconds + res.compile_seconds) / max(len(cands), 1)
             for c, p, prm, st in zip(cands, res.pred, res.params, res.status):
@@ -465,22 +443,19 @@ def _refused(prep, checked: dict[str, Any], t_start: float) -> DesignReport:
     return DesignReport(content=content, arrays=_arrays(prep))
 
 
-def _loop_reference(
-    gname, cands, X, yn, role, starts, T, n_pool, dmax, dt, inits, key, max_steps, res
-) -> dict:
+def _loop_reference(gname, cands, res, net, lin) -> dict:
     """Train the same candidates one after another with the same compiled trainer (the
-    peer of the vectorised search, timed in the same process on the same data)."""
+    peer of the vectorised search, timed in the same process on the same data). `net`:
+    the arguments of `train_network_group` (positional, keyword); `lin`: those of
+    `fit_linear_group` after the candidates."""
     if gname.startswith("network"):
-        loop = train_network_group(
-            cands, X, yn, role, n_pool, dmax, inits=inits, key=key, max_steps=max_steps, loop=True
-        )
+        loop = train_network_group(cands, *net[0], **net[1], loop=True)
         diff = float(np.nanmax(np.abs(loop.pred - res.pred))) if len(cands) else 0.0
         return {
             "loop_run_s": loop.run_seconds,
             "loop_compile_s": loop.compile_seconds,
             "loop_max_prediction_difference": diff,
         }
-    lin = (X, yn, starts, T.astype(float), n_pool, dmax, dt)
     first = fit_linear_group(gname, cands[:1], *lin)  # compiles the one-candidate shape
     t0 = time.perf_counter()
     for c in cands:

@@ -6,8 +6,8 @@
   candidate solves its masked normal equations (one `vmap`). The lag's time constant is
   profiled on a logarithmic grid (the lag is linear in its other parameters).
 - Networks (static MLP and TDNN of one hidden size) are trained by Levenberg-Marquardt,
-  all candidates and all their initialisations in one `vmap`-ed call of the public kernel
-  [`jaxvs.calibration.lm_step`][] under [`jaxvs.calibration.batched_while`][], with the
+  all candidates and all their initialisations in one `vmap`-ed call of the one LM driver
+  [`jaxvs.calibration.lm_solve_family`][] (work compaction by `batched_while`), with the
   perceptron's structured normal equations (`Perceptron.normal_equations`). A masked
   feature keeps its weights at zero (their rows of `JᵀJ` and `Jᵀr` are masked, so the
   damped step leaves them). Since the data are shared and only the weights are batched,
@@ -18,6 +18,7 @@
 
 from __future__ import annotations
 
+import functools
 import time
 from typing import Any, NamedTuple
 
@@ -28,10 +29,16 @@ import jax.random as jr
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from ...calibration import batched_while, lm_init, lm_running, lm_step
+from ...calibration import AbstractLMMonitor, BatchSchedule, lm_solve_family
 from ...models import Perceptron
 
-__all__ = ["Candidate", "GroupResult", "fit_linear_group", "train_network_group"]
+__all__ = [
+    "Candidate",
+    "GroupResult",
+    "NetworkTraining",
+    "fit_linear_group",
+    "train_network_group",
+]
 
 
 class Candidate(NamedTuple):
@@ -213,11 +220,44 @@ def delayed_target(y: np.ndarray, starts: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- networks
 
 
-class _NetState(eqx.Module):
-    lm: Any
-    best_theta: jax.Array
-    best_val: jax.Array
-    fails: jax.Array
+class NetworkTraining(eqx.Module):
+    """How each network is trained: at most `max_steps` Levenberg-Marquardt steps, stopped
+    after `max_fail` accepted steps that do not lower the stopping block's error
+    (MATLAB's `max_fail` rule)."""
+
+    max_steps: int = eqx.field(static=True, default=100)
+    max_fail: int = eqx.field(static=True, default=6)
+
+
+class _EarlyStopping(AbstractLMMonitor):
+    """The best parameters on the stopping block; stop after `max_fail` accepted steps
+    without improvement."""
+
+    forward: Any
+    XS: jax.Array
+    yS: jax.Array
+    max_fail: int = eqx.field(static=True)
+
+    def _val(self, theta):
+        e = self.forward(theta, self.XS) - self.yS
+        return jnp.mean(e**2)
+
+    def init(self, state, args):
+        return state.theta, self._val(state.theta), jnp.asarray(0)
+
+    def update(self, watch, old, new, args):
+        best_theta, best_val, fails = watch
+        accepted = new.cost < old.cost
+        v = self._val(new.theta)
+        better = accepted & (v < best_val)
+        return (
+            jnp.where(better, new.theta, best_theta),
+            jnp.where(better, v, best_val),
+            jnp.where(better, 0, fails + accepted.astype(fails.dtype)),
+        )
+
+    def running(self, watch, state, args):
+        return watch[2] < self.max_fail
 
 
 def init_members(keys, fmasks, n_features: int, hidden: int):
@@ -260,81 +300,30 @@ def _net_problem(n_features: int, hidden: int, dtype):
     return forward, evaluate
 
 
-# batched_while work compaction (heuristic): a first sweep of `first` LM steps for blocks
-# of `block` members, then the `tail` still-running members `bs` steps at a time.
-_OPTS = dict(block=16, first=10, tail=16, bs=5)
+# batched_while work compaction (heuristic): a first sweep of `first_steps` LM steps for
+# blocks of `block` members, then the `tail_block` still-running members `block_steps`
+# steps at a time.
+_SCHEDULE = BatchSchedule(block=16, first_steps=10, tail_block=16, block_steps=5)
 _CHUNK = 256
 
 
-def _train_impl(
-    theta0, pm, XT, yT, XS, yS, *, n_features, hidden, max_steps, max_fail, block, first, tail, bs
-):
-    forward, evaluate = _net_problem(n_features, hidden, theta0.dtype)
-    rtol = 1e-7
-    feasible = lambda th: jnp.asarray(True)
-
-    def ev(theta, a):
-        return evaluate(theta, (a, XT, yT))
-
-    def val(theta):
-        e = forward(theta, XS) - yS
-        return jnp.mean(e**2)
-
-    def init(theta, a):
-        lm = lm_init(ev, theta, a, rtol)
-        return _NetState(lm, theta, val(theta), jnp.asarray(0))
-
-    def cond(s, a):
-        return lm_running(s.lm, max_steps) & (s.fails < max_fail)
-
-    def body(s, a):
-        lm = lm_step(ev, feasible, s.lm, a, rtol)
-        accepted = lm.cost < s.lm.cost
-        v = val(lm.theta)
-        better = accepted & (v < s.best_val)
-        return _NetState(
-            lm,
-            jnp.where(better, lm.theta, s.best_theta),
-            jnp.where(better, v, s.best_val),
-            jnp.where(better, 0, s.fails + accepted.astype(s.fails.dtype)),
-        )
-
-    state0 = jax.vmap(init)(theta0, pm)
-    size = theta0.shape[0]
-    if size == 1:
-        s = jax.lax.while_loop(
-            lambda s: cond(s, pm[0]),
-            lambda s: body(s, pm[0]),
-            jax.tree_util.tree_map(lambda x: x[0], state0),
-        )
-        final = jax.tree_util.tree_map(lambda x: x[None], s)
-    else:
-        final = batched_while(
-            cond,
-            body,
-            state0,
-            pm,
-            block=block,
-            first_steps=first,
-            tail_block=tail,
-            block_steps=bs,
-        )
-    return final.best_theta, final.best_val, final.lm.num_steps
-
-
-_train_jit = jax.jit(
-    _train_impl,
-    static_argnames=(
-        "n_features",
-        "hidden",
-        "max_steps",
-        "max_fail",
-        "block",
-        "first",
-        "tail",
-        "bs",
-    ),
-)
+@functools.partial(jax.jit, static_argnames=("shape", "training"))
+def _train_jit(theta0, pm, data, shape: tuple[int, int], training: NetworkTraining):
+    """Train the members `theta0` (masks `pm`) on `data = (XT, yT, XS, yS)`; `shape`:
+    `(n_features, hidden)`."""
+    XT, yT, XS, yS = data
+    forward, evaluate = _net_problem(*shape, theta0.dtype)
+    lm, (best_theta, best_val, _) = lm_solve_family(
+        lambda theta, a: evaluate(theta, (a, XT, yT)),
+        theta0,
+        pm,
+        max_steps=training.max_steps,
+        rtol=1e-7,
+        schedule=_SCHEDULE,
+        feasible=lambda th: jnp.asarray(True),
+        monitor=_EarlyStopping(forward, XS, yS, training.max_fail),
+    )
+    return best_theta, best_val, lm.num_steps
 
 
 @eqx.filter_jit
@@ -353,8 +342,7 @@ def train_network_group(
     *,
     inits: int,
     key,
-    max_steps: int = 100,
-    max_fail: int = 6,
+    training: NetworkTraining = NetworkTraining(),
     loop: bool = False,
 ) -> GroupResult:
     """Train all network candidates of one hidden size, `inits` initialisations each, in
@@ -372,23 +360,24 @@ def train_network_group(
     Xj = jnp.asarray(X)
     T, S = role == 0, role == 1
     XT, yT, XS, yS = Xj[T], jnp.asarray(y[T]), Xj[S], jnp.asarray(y[S])
-    opts = dict(n_features=F, hidden=hidden, max_steps=max_steps, max_fail=max_fail, **_OPTS)
+    data = (XT, yT, XS, yS)
+    opts = dict(shape=(F, hidden), training=training)
     # compile first (reported apart), then run
     t0 = time.perf_counter()
     if loop:
-        comp = _train_jit.lower(theta0[:1], pm[:1], XT, yT, XS, yS, **opts).compile()
+        comp = _train_jit.lower(theta0[:1], pm[:1], data, **opts).compile()
     else:
-        comp = _train_jit.lower(theta0, pm, XT, yT, XS, yS, **opts).compile()
+        comp = _train_jit.lower(theta0, pm, data, **opts).compile()
     t1 = time.perf_counter()
     if loop:
         outs = [
-            jax.block_until_ready(comp(theta0[i : i + 1], pm[i : i + 1], XT, yT, XS, yS))
+            jax.block_until_ready(comp(theta0[i : i + 1], pm[i : i + 1], data))
             for i in range(theta0.shape[0])
         ]
         best = jnp.concatenate([o[0] for o in outs])
         bval = jnp.concatenate([o[1] for o in outs])
     else:
-        best, bval, _ = jax.block_until_ready(comp(theta0, pm, XT, yT, XS, yS))
+        best, bval, _ = jax.block_until_ready(comp(theta0, pm, data))
     t2 = time.perf_counter()
     bval = np.asarray(bval).reshape(len(cands), inits)
     bval = np.where(np.isfinite(bval), bval, np.inf)

@@ -2,6 +2,7 @@
 identification (IDIM-LS) and closed-loop calibration of drive models."""
 
 from ._drive_calibration import (
+    DriveSignals as DriveSignals,
     calibrate_drive as calibrate_drive,
     drive_residual as drive_residual,
 )

@@ -21,17 +21,25 @@ Both go through `jaxvs.calibrate` (Levenberg–Marquardt, forward-mode Jacobians
 the simulation), so estimates come with covariance and confidence intervals.
 """
 
+import dataclasses
 import warnings
 from typing import Any, Literal
 
 import jax.numpy as jnp
 import numpy as np
 
-from ...calibration import CalibrationResult, EquationError, ExcitationWarning, calibrate
+from ..._misc import options_object
+from ...calibration import (
+    CalibrateOptions,
+    CalibrationResult,
+    EquationError,
+    ExcitationWarning,
+    calibrate,
+)
 from ...data import Record
 from ...models import DriveAxis
 
-__all__ = ["calibrate_drive", "drive_residual"]
+__all__ = ["DriveSignals", "calibrate_drive", "drive_residual"]
 
 _CRITERIA = ("input", "output")
 
@@ -88,20 +96,28 @@ def drive_residual(
     return EquationError(fn)
 
 
+@dataclasses.dataclass(frozen=True)
+class DriveSignals:
+    """The signals of a drive record that [`calibrate_drive`][] uses: the `reference`,
+    `position` and `force` names, and an optional `command_offset` added to the controller
+    output (a signal name or an array)."""
+
+    reference: str = "r"
+    position: str = "q"
+    force: str = "u"
+    command_offset: str | np.ndarray | None = None
+
+
 def calibrate_drive(
     drive: DriveAxis,
     record: Record,
     *,
     criterion: Literal["input", "output"] = "input",
     free: Any = None,
-    reference: str = "r",
-    position: str = "q",
-    force: str = "u",
-    command_offset: str | np.ndarray | None = None,
+    signals: DriveSignals | None = None,
     min_speed: float = 1e-4,
-    max_steps: int = 100,
     solver: Any = None,
-    throw: bool = True,
+    **options: Any,
 ) -> CalibrationResult:
     r"""Calibrate the plant of a closed-loop drive from one experiment, the controller known.
 
@@ -119,12 +135,16 @@ def calibrate_drive(
     - `free`: which parameters are calibrated (as for `jaxvs.calibrate`); default all
       parameters of the mechanics (mass, friction, stiffness, backlash), the controller
       and actuator fixed.
-    - `reference`, `position`, `force`: signal names in `record`.
-    - `command_offset`: optional signal added to the controller output (a name in the
+    - `signals`: which signals of `record` to use, a [`DriveSignals`][], or its fields as
+      keywords: `reference`, `position`, `force` (signal names in `record`) and
+      `command_offset` (optional signal added to the controller output: a name in the
       record or an array; e.g. the EMPS validation pulses in V).
     - `min_speed`: speed [m/s] above which a sample counts as moving (identifiability
       check of friction).
-    - `max_steps`, `solver`, `throw`: passed to `jaxvs.calibrate`.
+    - `solver`: passed to `jaxvs.calibrate`.
+    - `**options`: besides the `signals` fields, the options of `jaxvs.calibrate`
+      (`max_steps`, default 100 here; `throw`, `rtol`, `atol`, `covariance`,
+      `confidence`).
 
     **Returns:**
 
@@ -137,6 +157,19 @@ def calibrate_drive(
     move both ways (friction not identifiable).
     """
     where = "calibrate_drive"
+    names = {f.name for f in dataclasses.fields(DriveSignals)}
+    chosen = {k: options.pop(k) for k in names & set(options)}
+    sig = options_object(DriveSignals, signals, chosen, where, "signals")
+    reference, position, force = sig.reference, sig.position, sig.force
+    command_offset = sig.command_offset
+    unknown = sorted(set(options) - set(CalibrateOptions.__annotations__))
+    if unknown:
+        raise TypeError(
+            f"{where}: unknown option(s) {unknown}; the options are the signals "
+            f"{sorted(names)} and those of jaxvs.calibrate "
+            f"{sorted(CalibrateOptions.__annotations__)}."
+        )
+    options.setdefault("max_steps", 100)
     if not isinstance(drive, DriveAxis):
         raise TypeError(
             f"{where}: drive must be a jaxvs.models.DriveAxis; got {type(drive).__name__}."
@@ -187,6 +220,5 @@ def calibrate_drive(
         drive_residual(criterion, dt=dt),
         solver,
         free=free,
-        max_steps=max_steps,
-        throw=throw,
+        **options,
     )

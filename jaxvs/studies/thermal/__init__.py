@@ -30,6 +30,7 @@ from ._selection import (
 )
 from ._train import (
     STOP_REASONS as STOP_REASONS,
+    TrainlmOptions as TrainlmOptions,
     TrainResult as TrainResult,
     fit_regression as fit_regression,
     normalise_network as normalise_network,

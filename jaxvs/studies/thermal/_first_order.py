@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ...calibration import lm_init, lm_running, lm_step
+from ...calibration import lm_solve
 from ...models import FirstOrder, PiecewiseFirstOrder
 
 __all__ = ["ThermalFitWarning", "fit_first_order", "fit_piecewise_first_order"]
@@ -81,12 +81,7 @@ def _lm(fun: Callable, theta0: Array, args: Any, max_steps: int, rtol: float):
         return 0.5 * jnp.dot(r, r), J.T @ J, J.T @ r
 
     feasible = lambda theta: jnp.all(jnp.isfinite(theta))
-    state = lm_init(evaluate, theta0, args, rtol)
-    return jax.lax.while_loop(
-        lambda s: lm_running(s, max_steps),
-        lambda s: lm_step(evaluate, feasible, s, args, rtol),
-        state,
-    )
+    return lm_solve(evaluate, theta0, args, max_steps=max_steps, rtol=rtol, feasible=feasible)
 
 
 def _vp_start(tau, y, w, span):

@@ -10,7 +10,7 @@ inputs, and Levenberg-Marquardt (MATLAB `trainlm`) or Adam training of the netwo
    study's TDNN); for other modules from the batched Jacobian (a `vmap` of per-sample
    reverse-mode gradients);
 2. the damped step `(JᵀJ + μ I) δ = -Jᵀe` by Cholesky -- jaxvs's one Levenberg-Marquardt
-   kernel (`jaxvs.calibration.lm_step`) with trainlm's `MarquardtDamping` --, with `μ`
+   (`jaxvs.calibration.lm_solve`) with trainlm's `MarquardtDamping` --, with `μ`
    multiplied by `mu_inc` until the step reduces the MSE and by `mu_dec` after a
    successful step (Hagan &
    Menhaj 1994, "Training feedforward networks with the Marquardt algorithm", IEEE TNN
@@ -36,17 +36,19 @@ from jaxtyping import Array, ArrayLike, Float, Int
 from ..._misc import timed_call
 from ...calibration import (
     RESULTS,
+    AbstractLMMonitor,
     ExcitationWarning,
     LMState,
     MarquardtDamping,
     lm_init,
-    lm_step,
+    lm_solve,
 )
 from ...models import BiasFreeRegression, Perceptron
 
 __all__ = [
     "STOP_REASONS",
     "TrainResult",
+    "TrainlmOptions",
     "fit_regression",
     "normalise_network",
     "train_adam",
@@ -61,6 +63,7 @@ STOP_REASONS: tuple[str, ...] = (
     "goal",
 )
 _MAX_EPOCHS, _VAL_STOP, _MU_MAX, _MIN_GRAD, _GOAL = range(5)
+_NO_LIMIT = np.iinfo(np.int32).max  # trial steps of one epoch: bounded by mu_max instead
 
 
 class TrainResult(eqx.Module):
@@ -230,23 +233,47 @@ class _LMState(eqx.Module):
     running: Array
 
 
-def _lm_impl(
-    net,
-    X,
-    yn,
-    Xv,
-    yvn,
-    has_val,
-    max_epochs,
-    max_fail,
-    mu0,
-    mu_dec,
-    mu_inc,
-    mu_max,
-    min_grad,
-    goal,
-    gram_dtype,
-):
+class TrainlmOptions(eqx.Module):
+    """The damping and gradient settings of [`train_lm`][], with MATLAB `trainlm`'s names
+    and defaults: the initial damping `mu`, its factors `mu_dec` after a successful and
+    `mu_inc` after a failed step, the damping `mu_max` at which training stops, and the
+    gradient norm `min_grad` (of the normalised MSE) below which it stops."""
+
+    mu: float = 1e-3
+    mu_dec: float = 0.1
+    mu_inc: float = 10.0
+    mu_max: float = 1e10
+    min_grad: float = 1e-7
+
+    def __check_init__(self):
+        mu, dec, inc, mu_max = self.mu, self.mu_dec, self.mu_inc, self.mu_max
+        if isinstance(mu, jax.Array):  # the traced copy inside the compiled trainer
+            return
+        if not (0 < dec < 1 < inc and mu > 0 and mu_max > mu):
+            raise ValueError(
+                "train_lm: need mu > 0, 0 < mu_dec < 1 < mu_inc and mu_max > mu (trainlm: "
+                "1e-3, 0.1, 10, 1e10)."
+            )
+
+
+class _UntilAccepted(AbstractLMMonitor):
+    """trainlm's epoch: trial steps with growing damping until one reduces the error or
+    the damping passes `mu_max`."""
+
+    mu_max: Array
+
+    def init(self, state, args):
+        return jnp.asarray(False)
+
+    def update(self, watch, old, new, args):
+        return new.cost < old.cost
+
+    def running(self, watch, state, args):
+        return (~watch) & (state.mu <= self.mu_max)
+
+
+def _lm_impl(data, max_epochs, max_fail, goal, gram_dtype, options: TrainlmOptions):
+    net, X, yn, Xv, yvn, has_val = data
     theta0, unravel, static = _split(net)
     scale2 = net.y_scale**2
     n = X.shape[0]
@@ -282,7 +309,7 @@ def _lm_impl(
             Jg = J.astype(gram)
             return (Jg.T @ Jg).astype(J.dtype), J.T @ e
 
-    # The one LM kernel (jaxvs.calibration.lm_step) with trainlm's damping: trials are
+    # The one LM (jaxvs.calibration.lm_solve) with trainlm's damping: trials are
     # judged by the cheap cost; the normal equations are formed once per accepted step.
     def cost(theta, _):
         return 0.5 * jnp.sum((outputs(theta, X) - yn) ** 2)
@@ -292,8 +319,8 @@ def _lm_impl(
         jtj, jtr = normal_equations(theta, e)
         return 0.5 * jnp.sum(e**2), jtj, jtr
 
-    damping = MarquardtDamping(mu_dec, mu_inc)
-    lm0 = lm_init(evaluate, theta0, None, 0.0, mu0)
+    damping = MarquardtDamping(options.mu_dec, options.mu_inc)
+    lm0 = lm_init(evaluate, theta0, None, 0.0, options.mu)
     mse0 = 2.0 * lm0.cost / n
     val0 = jnp.where(has_val, mse(theta0, Xv, yvn), jnp.nan)
     hist = jnp.full((max_epochs + 1,), jnp.nan, theta0.dtype)
@@ -313,17 +340,18 @@ def _lm_impl(
     def epoch(s: _LMState) -> _LMState:
         grad_norm = jnp.linalg.norm(2.0 * s.lm.jtr / n)
 
-        # trainlm's epoch: trial steps with growing damping until one reduces the error.
-        def trial_cond(c):
-            lm, ok = c
-            return (~ok) & (lm.mu <= mu_max)
-
-        def trial(c):
-            lm, _ = c
-            new = lm_step(evaluate, None, lm, None, 0.0, damping, cost=cost)
-            return new, new.cost < lm.cost
-
-        lm, ok = jax.lax.while_loop(trial_cond, trial, (s.lm, jnp.asarray(False)))
+        # trainlm's epoch: trial steps of the one LM driver until one reduces the error.
+        # (`rtol = 0`: no convergence test; the epoch loop below applies trainlm's stops.)
+        lm, ok = lm_solve(
+            evaluate,
+            eqx.tree_at(lambda st: st.converged, s.lm, jnp.asarray(False)),
+            None,
+            max_steps=_NO_LIMIT,
+            rtol=0.0,
+            damping=damping,
+            cost=cost,
+            monitor=_UntilAccepted(options.mu_max),
+        )
         m = 2.0 * lm.cost / n
         k = s.epoch + 1
         v = jnp.where(has_val, mse(lm.theta, Xv, yvn), jnp.nan)
@@ -339,7 +367,7 @@ def _lm_impl(
                 ~ok,
                 _MU_MAX,
                 jnp.where(
-                    grad_norm < min_grad,
+                    grad_norm < options.min_grad,
                     _MIN_GRAD,
                     jnp.where(has_val & (fails >= max_fail), _VAL_STOP, _MAX_EPOCHS),
                 ),
@@ -359,6 +387,8 @@ def _lm_impl(
             running=running,
         )
 
+    # trainlm's epochs (each one LM solve until a step is accepted) with their stopping
+    # rules and the early stopping on the validation block.
     s = jax.lax.while_loop(lambda s: s.running, epoch, s0)
     trained = eqx.tree_at(lambda m: m.perceptron, net, eqx.combine(unravel(s.best_theta), static))
     return trained, s.train_hist, s.val_hist, s.epoch, s.best_epoch, s.stop
@@ -372,14 +402,10 @@ def train_lm(
     validation: tuple[ArrayLike, ArrayLike] | None = None,
     max_epochs: int = 1000,
     max_fail: int = 6,
-    mu: float = 1e-3,
-    mu_dec: float = 0.1,
-    mu_inc: float = 10.0,
-    mu_max: float = 1e10,
-    min_grad: float = 1e-7,
     goal: float = 0.0,
     normalise: bool = True,
     gram_dtype: Any = None,
+    options: TrainlmOptions = TrainlmOptions(),
 ) -> TrainResult:
     """Train all weights of a network by Levenberg-Marquardt (a MATLAB `trainlm` clone).
 
@@ -389,13 +415,13 @@ def train_lm(
     - `u`: `(time, input)` training inputs; `y`: `(time,)` training target.
     - `validation`: `(u_val, y_val)`, a contiguous validation block for early stopping
       (MATLAB's `max_fail` rule); without it training runs to another stop criterion.
-    - `max_epochs`, `max_fail`, `mu`, `mu_dec`, `mu_inc`, `mu_max`, `min_grad`: as
-      `trainlm` (`min_grad` on the gradient of the normalised MSE).
+    - `max_epochs`, `max_fail`: as `trainlm`.
     - `goal`: stop when the training MSE [target unit²] reaches it.
     - `normalise`: set the network's input/output normalisation from the training data
       first (`mapminmax`); `False` keeps the network's own.
     - `gram_dtype`: dtype in which `JᵀJ` is accumulated (default: the data's); e.g.
       `jnp.float32` under float64 halves the dominant cost of an epoch.
+    - `options`: trainlm's damping and gradient settings ([`TrainlmOptions`][]).
 
     **Returns:**
 
@@ -409,25 +435,19 @@ def train_lm(
         raise ValueError(f"train_lm: max_epochs must be an int >= 0, got {max_epochs!r}.")
     if not (isinstance(max_fail, int) and max_fail >= 1):
         raise ValueError(f"train_lm: max_fail must be an int >= 1, got {max_fail!r}.")
-    if not (0 < mu_dec < 1 < mu_inc and mu > 0 and mu_max > mu):
-        raise ValueError(
-            "train_lm: need mu > 0, 0 < mu_dec < 1 < mu_inc and mu_max > mu (trainlm: 1e-3, "
-            "0.1, 10, 1e10)."
-        )
+    if not isinstance(options, TrainlmOptions):
+        raise TypeError(f"train_lm: options must be a TrainlmOptions; got {options!r}.")
     data = _prepare(net, u, y, validation, normalise, "train_lm")
     f = jnp.result_type(float)
-    args = (
-        *data,
-        max_epochs,
-        max_fail,
-        jnp.asarray(mu, f),
-        float(mu_dec),  # static: the damping policy is part of the compiled loop
-        float(mu_inc),
-        jnp.asarray(mu_max, f),
-        jnp.asarray(min_grad, f),
-        jnp.asarray(goal, f),
-        None if gram_dtype is None else jnp.dtype(gram_dtype),
+    traced = TrainlmOptions(
+        mu=jnp.asarray(options.mu, f),
+        mu_dec=float(options.mu_dec),  # static: the damping policy is part of the compiled loop
+        mu_inc=float(options.mu_inc),
+        mu_max=jnp.asarray(options.mu_max, f),
+        min_grad=jnp.asarray(options.min_grad, f),
     )
+    gram = None if gram_dtype is None else jnp.dtype(gram_dtype)
+    args = (data, max_epochs, max_fail, jnp.asarray(goal, f), gram, traced)
     return _train(_lm_impl, args)
 
 

@@ -394,16 +394,18 @@ def _estimate_highpass(omega, H2, sw, q, wn, ze, band, diagram, rw) -> float:
 MODE_GAIN = 0.1
 
 
-def _add_modes_by_misfit(omega, H2, sw, q, wn, ze, band, a_hp, diagram, rw, auto_hp: bool):
+def _add_modes_by_misfit(omega, H2, sw, q, modes, band, a_hp, diagram, rw, auto_hp: bool):
     """Forward selection on top of the stabilisation-diagram choice: the remaining pole
     tracks (stable over >= 2 orders, > 2 % away in frequency from the chosen ones) are
     tried longest first, and each joins when it lowers the summed squared LSFD misfit of
     both FRFs by more than `MODE_GAIN`. Heavily damped modes (ζ ~ 0.2) stabilise over few
     orders and may miss the diagram's default threshold, and a TMF without one of its modes
     is wrong by far more than the noise. With `auto_hp` the sensor high-pass is estimated
-    again after each added mode (a missing mode biases it).
+    again after each added mode (a missing mode biases it). `modes`: the chosen
+    `(omega_n, zeta)`.
 
     **Returns:** `(omega_n, zeta, a_hp)`."""
+    wn, ze = modes
 
     def misfit(w_, z_):
         fit = _receptance_lsfd(omega, H2, sw, q, w_, z_, band, a_hp, diagram, rw)
@@ -598,7 +600,7 @@ def tmf_from_impacts(
         a_hp = 0.0 if highpass is None else float(highpass)
     if n_modes is None and not lower_residual:
         wn, ze, a_hp = _add_modes_by_misfit(
-            omega, H2, sw, q, wn, ze, band, a_hp, fit.diagram, rw, highpass == "auto"
+            omega, H2, sw, q, (wn, ze), band, a_hp, fit.diagram, rw, highpass == "auto"
         )
     if not lower_residual:
         fit = _receptance_lsfd(omega, H2, sw, q, wn, ze, band, a_hp, fit.diagram, rw)
@@ -788,6 +790,12 @@ def tmf_from_hammer(
     return result._replace(estimate=estimate)
 
 
+# The options of `tmf_from_frfs` besides the ratio's fit, and their defaults.
+_FRF_OPTIONS: dict[str, Any] = dict(
+    n_modes=None, lower_residual=True, max_order=40, excitation=None, operation="drive"
+)
+
+
 def tmf_from_frfs(
     frf_response: FRFData,
     frf_reference: FRFData,
@@ -797,11 +805,7 @@ def tmf_from_frfs(
     band: tuple[float, float] | None = None,
     weights: Literal["uniform", "relative"] | ArrayLike = "uniform",
     stable: bool = True,
-    n_modes: int | None = None,
-    lower_residual: bool = True,
-    max_order: int = 40,
-    excitation: Side | None = None,
-    operation: Literal["drive", "tcp"] = "drive",
+    **options: Any,
 ) -> TMFIdentification:
     r"""Transmissibility `T = H_response / H_reference` of two measured FRFs with one
     excitation point (eq. 6), identified by either route.
@@ -828,16 +832,26 @@ def tmf_from_frfs(
     - `stable`: rational route: keep the poles in the left half-plane. A TMF's poles are
       the zeros of `H_reference`, which for a transfer (not driving-point) FRF may lie in
       the right half-plane: pass `False` when the fit reports unstable-looking data.
-    - `n_modes`, `lower_residual`, `max_order`: modal route, see [`tmf_from_impacts`][];
-      `lower_residual` defaults to `True` here (any structure, e.g. free-free: `T(0)` is then
-      not identified).
-    - `excitation`, `operation`: optional [`check_excitation_location`][]; `None` skips it.
+    - `**options` (keywords; defaults in `_FRF_OPTIONS`):
+        - `n_modes` (`None`), `lower_residual` (`True`), `max_order` (40): modal route, see
+          [`tmf_from_impacts`][]; `lower_residual` defaults to `True` here (any structure,
+          e.g. free-free: `T(0)` is then not identified).
+        - `excitation` (`None`: skipped), `operation` (`"drive"`): optional
+          [`check_excitation_location`][].
 
     **Returns:** a [`TMFIdentification`][] with route `"ratio"` or `"modal"`; `estimate` is
     the measured ratio (`FRFData`, kind `"transmissibility"`, coherence the smaller of both
     FRFs' when they carry one), `details` the `FitReport` or `ModalFit`.
     """
     where = "tmf_from_frfs"
+    unknown = sorted(set(options) - set(_FRF_OPTIONS))
+    if unknown:
+        raise TypeError(
+            f"{where}: unknown option(s) {unknown}; the options are {list(_FRF_OPTIONS)}."
+        )
+    o = {**_FRF_OPTIONS, **options}
+    n_modes, lower_residual, max_order = o["n_modes"], o["lower_residual"], o["max_order"]
+    excitation, operation = o["excitation"], o["operation"]
     for name, d in (("frf_response", frf_response), ("frf_reference", frf_reference)):
         if not isinstance(d, FRFData):
             raise TypeError(
