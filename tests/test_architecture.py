@@ -47,9 +47,6 @@ LATE_BINDINGS = {
     # them up when it is called.
     ("jaxvs.models._base", "jaxvs.models._simulate"),
     ("jaxvs.models._base", "jaxvs.models.lti"),
-    # Pending: `diagnose` runs `check` first and `check` reuses the diagnosis's
-    # preparation; the shared preparation that removes this circle is under way.
-    ("jaxvs.diagnosis._diagnose", "jaxvs.diagnosis._check"),
 }
 
 
@@ -271,8 +268,6 @@ LONG_SIGNATURES = {
     "jaxvs.diagnosis._discover:discover",  # the discovery options of jaxvs diagnose
     "jaxvs.calibration._calibrate:calibrate",  # shaped like optimistix.least_squares
     # Pending: diagnosis internals, rebuilt in their own change.
-    "jaxvs.diagnosis._engine:search",
-    "jaxvs.diagnosis._engine:_prune",
     "jaxvs.diagnosis._discover:_fit_formula",
 }
 
@@ -314,7 +309,6 @@ MAX_DIAGNOSIS_LINES = 150
 # name". The list may only shrink (a listed function may already be shorter).
 LONG_FUNCTIONS = {
     # being split
-    "jaxvs.diagnosis._engine:search",
     "jaxvs.diagnosis._diagnose:diagnose",
     "jaxvs.diagnosis._discover:discover",
     "jaxvs.diagnosis._report:DiagnosisReport.to_markdown",
