@@ -23,7 +23,7 @@ import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
-from ..calibration import free_spec, lm_init, lm_running, lm_step, unwrap
+from ..calibration import free_spec, lm_init, lm_solve, unwrap
 from ._base import Context, Experiment, GapModel
 
 __all__ = [
@@ -326,11 +326,7 @@ def _fit_fixed(arrays, static, active, sel, psize, batch, wfit, max_steps: int, 
         start = (0.5 * jnp.dot(r1, r1), jac1.T @ jac1, jac1.T @ r1)
         state = lm_init(lambda theta, args: start, sel.T @ flat, None, 1e-8)
         cost_start = state.cost
-        state = jax.lax.while_loop(
-            lambda s: lm_running(s, max_steps),
-            lambda s: lm_step(evaluate, lambda t: jnp.asarray(True), s, None, 1e-8),
-            state,
-        )
+        state = lm_solve(evaluate, state, None, max_steps=max_steps, rtol=1e-8)
         final = eqx.combine(unravel(base + sel @ state.theta), pstatic)
         pred = jax.vmap(lambda a: unwrap(final)(a, active))(inputs)
         return eqx.filter(final, eqx.is_array), state.cost, cost_start, pred
