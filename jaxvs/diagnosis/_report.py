@@ -111,17 +111,24 @@ class DiagnosisReport:
         with its `schema_version`; the one place `report.json` is written from."""
         return {"schema_version": SCHEMA_VERSION, **json_safe(self.content)}
 
+    def _header(self) -> list[str]:
+        """The title, the status line (the verdict first) and the nominal model."""
+        c = self.content
+        return [
+            f"# Sim-to-real gap diagnosis — family `{c['family']}`",
+            "",
+            f"**{self.status_line}**",
+            "",
+            f"Nominal model: {c['nominal']['model']}.",
+            "",
+        ]
+
     def to_markdown(self) -> str:
         c = self.content
         if c.get("not_identifiable"):
             return "\n".join(
                 [
-                    f"# Sim-to-real gap diagnosis — family `{c['family']}`",
-                    "",
-                    f"**{self.status_line}**",
-                    "",
-                    f"Nominal model: {c['nominal']['model']}.",
-                    "",
+                    *self._header(),
                     "## Not identifiable: no verdict",
                     "",
                     f"{c['not_identifiable'].rstrip('.')}.",
@@ -133,12 +140,7 @@ class DiagnosisReport:
         v = c["verdict"]
         pct = lambda x: "—" if _num(x) == "—" else f"{100 * x:.2f} %"
         lines = [
-            f"# Sim-to-real gap diagnosis — family `{c['family']}`",
-            "",
-            f"**{self.status_line}**",
-            "",
-            f"Nominal model: {c['nominal']['model']}.",
-            "",
+            *self._header(),
             *_warnings_markdown(c),
             "## Verdict",
             "",
