@@ -396,10 +396,9 @@ class AbstractFamily(abc.ABC):
         loop and preprocessing). Returns `count` lists, each like `experiments`."""
 
     def nominal_parameters(self, model: GapModel) -> dict[str, float]:
-        nom = unwrap(model.nominal)
-        if hasattr(nom, "parameters"):
-            return nom.parameters()
-        return {}
+        """The calibrated nominal model's physical parameters, by name (every nominal
+        model states them: `parameters()`)."""
+        return unwrap(model.nominal).parameters()
 
     def describe_nominal(self) -> str:
         return ""
