@@ -22,6 +22,7 @@ from . import (
 )
 from .design import DesignReport as DesignReport
 from .drive import (
+    DriveSignals as DriveSignals,
     ForcePrediction as ForcePrediction,
     IDIMResult as IDIMResult,
     calibrate_drive as calibrate_drive,
@@ -45,6 +46,7 @@ from .thermal import (
     NoOperatingPointChangeWarning as NoOperatingPointChangeWarning,
     ResidualAnalysis as ResidualAnalysis,
     ThermalFitWarning as ThermalFitWarning,
+    TrainlmOptions as TrainlmOptions,
     TrainResult as TrainResult,
     correct_outliers as correct_outliers,
     correlation_matrix as correlation_matrix,
