@@ -176,10 +176,8 @@ def test_formula_coefficient_intervals_cover_the_truth():
             {k: jnp.asarray(v)[None] for k, v in d.items()},
             jnp.asarray(d["y"])[None],
             jnp.ones((1, n)),
-            jnp.asarray([30.0]),
-            jnp.asarray([math.log(5.0)]),
-            jnp.asarray([-jnp.inf]),
-            jnp.asarray([jnp.inf]),
+            (jnp.asarray([30.0]), jnp.asarray([math.log(5.0)])),
+            (jnp.asarray([-jnp.inf]), jnp.asarray([jnp.inf])),
             fns,
             100,
         )
