@@ -165,7 +165,7 @@ def test_formula_coefficient_intervals_cover_the_truth():
     member = Member(_k_vexp(), 5.0)
     model = GapModel(RigidNominal(jnp.asarray(10.0), jnp.asarray(60.0), jnp.asarray(2.0)))
     flat, unravel, static = _split(model)
-    fns = ((member.kind.columns, 1, True, False),)
+    fns = ((member.kind.columns, 1, True, "add"),)
     hits = np.zeros(2)
     reps = 200
     for _ in range(reps):

@@ -75,15 +75,19 @@ from ..calibration import (
     unwrap,
 )
 from ..signal import bspline_basis, difference_penalty, quantile_knots
-from ._base import Experiment, GapModel
+from ._base import Experiment, GapModel, predict
 from ._dictionary import (
     DRIVE_NAMED,
     THERMAL_NAMED,
+    TMF_NAMED,
     Member,
     drive_force_dictionary,
+    drive_input_dictionary,
     nearest_named,
     thermal_heat_dictionary,
     thermal_sensor_dictionary,
+    tmf_output_dictionary,
+    tmf_static_dictionary,
 )
 from ._stats import (
     block_bootstrap_indices,
@@ -98,11 +102,14 @@ from ._thermal import first_order_lag
 __all__ = ["SLOT_FAMILIES", "Discovered", "DiscoveryOptions", "discover"]
 
 # the families with a discovery slot (the others report that discovery was not run)
-SLOT_FAMILIES = ("drive", "thermal")
+SLOT_FAMILIES = ("drive", "thermal", "tmf")
 
 SLOT_FORCE = "additional force on the axis"
+SLOT_INPUT = "input nonlinearity u → g(u)"
 SLOT_HEAT = "additional heat flow into the bearing node"
 SLOT_SENSOR = "additive term of the bearing sensor"
+SLOT_OUTPUT = "additive term of the tool-side output"
+SLOT_STATIC = "static output nonlinearity"
 
 # slot inputs of the drive's force slot: label -> array key (the product `v·f(t)` is the
 # viscous coefficient varying in time)
@@ -116,7 +123,24 @@ _DRIVE_INPUTS = {
 # The recorded force `u` is the target of the inverse-dynamics model: every unmodelled
 # force is in it, so a flexible term in `u` gains on any gap (not only an input
 # nonlinearity) and cannot say where the gap enters. It is left out of the additive
-# slot; the input nonlinearity `u → g(u)` is its own slot (`"force"` in `_Basis`).
+# slot, and so is a term in it for the input nonlinearity: the axis receives `g(u)`, so
+# the recorded force is `u = g⁻¹(f_m)` with `f_m` the force the model says the axis
+# needs; the slot's term is a function of the model's force `f_m` (the calibrated model's
+# output, held for the flexible term, the model's own output in the formula's
+# recalibration), free of the force's noise.
+_DRIVE_INPUT_INPUTS = {"force": "yhat"}
+
+# slot inputs of the tmf slots: an additive term of the tool-side output in the encoder's
+# position, velocity and the encoder position times a function of the motion's amplitude
+# (a transmission that stiffens with the amplitude), and a static nonlinearity of the
+# model's output (the calibrated TMF's prediction, held: the basis stays linear and known,
+# as the thermal lag is held).
+_TMF_OUTPUT_INPUTS = {
+    "encoder position": "x_e",
+    "encoder velocity": "xd_e",
+    "x_e·f(amplitude)": "x_e*amp",
+}
+_TMF_STATIC_INPUTS = {"model output": "yhat"}
 
 # slot inputs of the thermal slots: label -> array key. The heat flow enters the bearing
 # node (before its lag, when the model has one); the sensor term is added after it. A heat
@@ -151,24 +175,30 @@ class _Slots:
     axis_labels: dict[str, str]
     ylabel: str
     nested: dict[str, str] = dataclasses.field(default_factory=dict)
+    # the figure's y label of a product input `a*b` (the term over `a`, against `b`)
+    product_ylabels: dict[str, str] = dataclasses.field(default_factory=dict)
 
 
 _DRIVE_SLOTS = _Slots(
-    inputs=_DRIVE_INPUTS,
-    slot_of=dict.fromkeys(_DRIVE_INPUTS, SLOT_FORCE),
+    inputs={**_DRIVE_INPUTS, **_DRIVE_INPUT_INPUTS},
+    slot_of=dict.fromkeys(_DRIVE_INPUTS, SLOT_FORCE)
+    | dict.fromkeys(_DRIVE_INPUT_INPUTS, SLOT_INPUT),
     lagged=frozenset(),
-    keys=("v", "q", "a", "u", "t"),
-    dictionaries={SLOT_FORCE: drive_force_dictionary},
+    keys=("v", "q", "a", "u", "t", "yhat"),
+    dictionaries={SLOT_FORCE: drive_force_dictionary, SLOT_INPUT: drive_input_dictionary},
     named=DRIVE_NAMED,
-    symbols={k: k for k in ("v", "q", "a", "u", "t")},
+    symbols={k: k for k in ("v", "q", "a", "u", "t")} | {"yhat": "f_m"},
     axis_labels={
         "v": "velocity [m/s]",
         "q": "position [m]",
         "a": "acceleration [m/s²]",
         "t": "time [s]",
         "v*t": "time [s]",
+        "u": "recorded force u [N]",
+        "yhat": "model force f_m [N]",
     },
     ylabel="additional force [N]",
+    product_ylabels={"v*t": "viscous coefficient f(t) [N·s/m]"},
 )
 
 
@@ -177,7 +207,7 @@ def _thermal_slots(cal: Sequence[Experiment], lag: Any) -> _Slots:
     columns pass through the model's lag when it has one."""
 
     def varies(key):
-        src = "s" if key == "s*t" else key
+        src = key.split("*")[0]
         x = np.concatenate([np.asarray(e.arrays[src], float) for e in cal])
         return float(np.ptp(x)) > 0
 
@@ -203,13 +233,39 @@ def _thermal_slots(cal: Sequence[Experiment], lag: Any) -> _Slots:
         ylabel="additional bearing temperature [K]",
         # a heat flow in speed and time holds the sensor's term in time beside it
         nested={"speed·f(time)": "time (sensor)"},
+        product_ylabels={"s*t": "heat flow per unit speed f(t) [K/rpm]"},
     )
+
+
+_TMF_SLOTS = _Slots(
+    inputs={**_TMF_OUTPUT_INPUTS, **_TMF_STATIC_INPUTS},
+    slot_of=dict.fromkeys(_TMF_OUTPUT_INPUTS, SLOT_OUTPUT)
+    | dict.fromkeys(_TMF_STATIC_INPUTS, SLOT_STATIC),
+    lagged=frozenset(),
+    keys=("x_e", "xd_e", "amp", "yhat", "t"),
+    dictionaries={SLOT_OUTPUT: tmf_output_dictionary, SLOT_STATIC: tmf_static_dictionary},
+    named=TMF_NAMED,
+    symbols={"x_e": "x_e", "xd_e": "xdot_e", "amp": "A", "yhat": "xhat_t", "t": "t"},
+    axis_labels={
+        "x_e": "encoder position x_e [m]",
+        "xd_e": "encoder velocity [m/s]",
+        "x_e*amp": "x_e amplitude A [m]",
+        "yhat": "model output x̂_t [m]",
+        "t": "time [s]",
+    },
+    ylabel="additional tool-side motion [m]",
+    # a gain that changes with the amplitude holds a static term in x_e beside it
+    nested={"x_e·f(amplitude)": "encoder position"},
+    product_ylabels={"x_e*amp": "additional gain f(A) [m/m]"},
+)
 
 
 def _family_slots(name: str, cal: Sequence[Experiment], lag: Any) -> _Slots:
     """The slots of the family `name` on the calibration slot experiments."""
     if name == "thermal":
         return _thermal_slots(cal, lag)
+    if name == "tmf":
+        return _TMF_SLOTS
     return _DRIVE_SLOTS
 
 
@@ -313,16 +369,26 @@ class Discovered:
 # ------------------------------------------------------------------------------ data
 
 
-def _slot_experiment(e: Experiment, family: str = "drive") -> Experiment:
+def _slot_experiment(e: Experiment, family: str = "drive", model: Any = None) -> Experiment:
     """The experiment with the slot inputs the family's model does not read: time `t` [s]
-    (the record's own), and for the drive the recorded force `u` (the target), for
-    the thermal family the speed `s = |v_m|`."""
+    (the record's own), and for the drive the recorded force `u` (the target) and the
+    calibrated `model`'s force `yhat`, for
+    the thermal family the speed `s = |v_m|`, for the tmf family the encoder velocity
+    `xd_e`, the motion's amplitude `amp` (the moving rms of `x_e` over 50 ms) and the
+    calibrated `model`'s output `yhat`."""
     arrays = dict(e.arrays)
     arrays["t"] = np.asarray(e.t, float)
     if family == "thermal":
         arrays["s"] = np.abs(np.asarray(e.arrays["v_m"], float))
+    elif family == "tmf":
+        xe = np.asarray(e.arrays["x_e"], float)
+        arrays["xd_e"] = np.gradient(xe, e.dt)
+        w = max(4, int(round(0.05 / e.dt)))
+        arrays["amp"] = np.sqrt(np.convolve((xe - xe.mean()) ** 2, np.ones(w) / w, mode="same"))
+        arrays["yhat"] = predict(model, e)
     else:
         arrays["u"] = np.asarray(e.arrays["y"], float)
+        arrays["yhat"] = predict(model, e)
     return dataclasses.replace(e, arrays=arrays)
 
 
@@ -360,20 +426,13 @@ class _Basis:
         self.blocks: dict[str, slice] = {}
         k0 = 0
         for label, key in self.inputs.items():
-            src = "t" if key in ("v*t", "s*t") else key
+            src = key.split("*")[-1]
             x = np.concatenate([np.asarray(e.arrays[src], float) for e in cal])
-            if key == "u":
-                # the recorded force is the target: a term in it may not contain the
-                # identity (it would predict the force from itself), so only its excess
-                # beyond levels at high quantiles acts, on each side: `(u − k)₊`, `(u + k)₋`
-                self.knots[label] = np.quantile(np.abs(x), (0.5, 0.7, 0.8, 0.9, 0.95))
-                k = 2 * self.knots[label].size
-            else:
-                # a ripple of many periods over the travel needs many knots in position
-                nb = {"v*t": max(4, n_basis - 2), "s*t": max(4, n_basis - 2), "q": 3 * n_basis}
-                nb = nb.get(key, n_basis)
-                self.knots[label] = quantile_knots(x, nb)
-                k = self.knots[label].size - 4
+            # a ripple of many periods over the travel needs many knots in position
+            nb = 3 * n_basis if key == "q" else n_basis
+            nb = max(4, n_basis - 2) if "*" in key else nb
+            self.knots[label] = quantile_knots(x, nb)
+            k = self.knots[label].size - 4
             self.blocks[label] = slice(k0, k0 + k)
             k0 += k
         self.size = k0
@@ -381,12 +440,9 @@ class _Basis:
     def __call__(self, d: Mapping[str, Any]) -> jnp.ndarray:
         cols = []
         for label, key in self.inputs.items():
-            if key in ("v*t", "s*t"):
-                b = jnp.asarray(d[key[0]])[:, None] * bspline_basis(d["t"], self.knots[label])
-            elif key == "u":
-                u = jnp.asarray(d["u"])[:, None]
-                lv = jnp.asarray(self.knots[label])[None, :]
-                b = jnp.concatenate([jnp.maximum(u - lv, 0.0), jnp.minimum(u + lv, 0.0)], -1)
+            if "*" in key:
+                a, b_ = key.split("*")
+                b = jnp.asarray(d[a])[:, None] * bspline_basis(d[b_], self.knots[label])
             else:
                 b = bspline_basis(d[key], self.knots[label])
             cols.append(b)
@@ -397,8 +453,6 @@ class _Basis:
         for label, key in self.inputs.items():
             sl = self.blocks[label]
             k = sl.stop - sl.start
-            if key == "u":
-                continue  # hinges: the ridge only
             d2 = np.zeros((k - 2, self.size))
             d2[:, sl] = difference_penalty(k, 2)
             rows.append(math.sqrt(lam * n / k) * d2)
@@ -561,17 +615,19 @@ def _fit_formula(params, static, inputs, y, wfit, start, bounds, fns, max_steps)
     flat, unravel = ravel_pytree(params)
     p, k = flat.size, coefs0.size
 
-    def formula(c, logs, d, dyn):
-        # terms of a heat flow (flag `lagged`) pass through the model's lag `dyn`
+    def formula(c, logs, d, dyn, ym):
+        # terms of a heat flow (mode "lag") pass through the model's lag `dyn`; terms of
+        # a static output nonlinearity (mode "static") read the model's own output
         out, heat, i = 0.0, 0.0, 0
-        for j, (fn, ncol, _, lagged) in enumerate(fns):
-            term = fn(d, jnp.exp(logs[j])) @ c[i : i + ncol]
-            if lagged:
+        d_static = {**d, "yhat": ym}
+        for j, (fn, ncol, _, mode) in enumerate(fns):
+            term = fn(d_static if mode == "static" else d, jnp.exp(logs[j])) @ c[i : i + ncol]
+            if mode == "lag":
                 heat = heat + term
             else:
                 out = out + term
             i += ncol
-        if dyn is not None and any(f[3] for f in fns):
+        if dyn is not None and any(f[3] == "lag" for f in fns):
             out = out + _lag(heat, dyn)
         else:
             out = out + heat
@@ -581,7 +637,12 @@ def _fit_formula(params, static, inputs, y, wfit, start, bounds, fns, max_steps)
         m = unwrap(eqx.combine(unravel(theta[:p]), static))
         c, logs = theta[p : p + k], theta[p + k :]
         dyn = _dynamics(m)
-        return jax.vmap(lambda d: m(d) + formula(c, logs, d, dyn))(inputs)
+
+        def one(d):
+            ym = m(d)
+            return ym + formula(c, logs, d, dyn, ym)
+
+        return jax.vmap(one)(inputs)
 
     # the log shape of a shapeless kind is carried with a zero Jacobian: LM leaves it
     def resid(theta, args):
@@ -732,7 +793,7 @@ class _Selection:
     Bs: np.ndarray
     flat0: np.ndarray
     through_lag: bool
-    med_u: float
+    limits: dict[str, float]  # a limit's lower bound (shape name -> median of its input)
 
 
 # ------------------------------------------------------------------------------ steps
@@ -780,8 +841,8 @@ def _resolve(report_or_model, calibration, validation, family):
 
 def _problem(model, calibration, validation, fam, opts: DiscoveryOptions) -> _Problem:
     """The slot experiments, the family's slots and the flexible basis."""
-    cal = [_slot_experiment(e, fam.name) for e in calibration]
-    val = [_slot_experiment(e, fam.name) for e in validation]
+    cal = [_slot_experiment(e, fam.name, model) for e in calibration]
+    val = [_slot_experiment(e, fam.name, model) for e in validation]
     y_cal = np.concatenate([e.y for e in cal])
     scale = 1.0 / max(float(np.sqrt(np.mean(y_cal**2))), 1e-300)
     n_samples = int(sum(e.n for e in cal))
@@ -859,7 +920,7 @@ def _null_reductions(prob: _Problem, rng: np.random.Generator) -> list[float]:
     exps = list(prob.calibration) + list(prob.validation)
     out = []
     for s in fam.null_experiments(nom, exps, rng, n_null):
-        s = [_slot_experiment(e, fam.name) for e in s]
+        s = [_slot_experiment(e, fam.name, prob.model) for e in s]
         _, p_null, _, _ = _flexible_step(
             nom, s, prob.n_cal, prob.basis, prob.scale, prob.masks, prob.pen, prob.lagged
         )
@@ -912,11 +973,6 @@ def _slot_members(prob: _Problem, best: str, cal_d: dict[str, np.ndarray]) -> li
         # for it
         src = {"s*t": ("s", "t")}.get(key, (key,))
         members = [m for m in members if set(m.kind.inputs) <= set(src) | {"T_chassis"}]
-    if prob.fam.name == "drive" and key != "u":
-        # the recorded force is the target: a term in it enters the formula only when
-        # the flexible term says the gap lives there (else it stands in for any term
-        # correlated with the force, the noise included)
-        members = [m for m in members if "u" not in m.kind.inputs]
     return members
 
 
@@ -976,9 +1032,10 @@ def _select(prob: _Problem, flex: _Flexible, best: str, rng) -> _Selection:
         Xs, rs, groups, resamples=idx, base=Bs, n_eff=n_eff, margin=o.min_evidence
     )
     freq, final = _kept(members, supports, full, o.stability)
-    med_u = float(np.median(np.abs(cal_d["u"]))) if "u" in cal_d else 0.0
+    # a limit (`L`, of the model's output) lies above the median of its input
+    limits = {"L": float(np.median(np.abs(cal_d["yhat"])))} if "yhat" in cal_d else {}
     return _Selection(
-        members, X, final, freq, full, bounds, rows, Xs, rs, Bs, flat0, through_lag, med_u
+        members, X, final, freq, full, bounds, rows, Xs, rs, Bs, flat0, through_lag, limits
     )
 
 
@@ -1018,9 +1075,10 @@ def _start(sel: _Selection) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, n
     b = sel.bounds
     lo = np.array([np.log(b[m.kind.name][0] / 3) if m.shape is not None else -np.inf for m in fm])
     hi = np.array([np.log(b[m.kind.name][1] * 3) if m.shape is not None else np.inf for m in fm])
-    if sel.med_u > 0:
-        # a force limit lies above the median force (a limit, not the force itself)
-        lo = np.where([m.kind.shape == "F" for m in fm], np.log(sel.med_u), lo)
+    for name, med in sel.limits.items():
+        # a limit lies above the median of its input (a limit, not the input itself)
+        if med > 0:
+            lo = np.where([m.kind.shape == name for m in fm], np.log(med), lo)
     logs0 = np.clip(logs0, lo + 1e-9, hi - 1e-9)
     return c0, logs0, (lo, hi)
 
@@ -1031,8 +1089,10 @@ def _recalibrate(prob: _Problem, flex: _Flexible, sel: _Selection, out: Discover
     o = prob.opts
     fm = [sel.members[j] for j in sel.final]
     c0, logs0, bounds = _start(sel)
+    static_slot = prob.slots.slot_of[out.flexible["input"]] == SLOT_STATIC
+    mode = "lag" if sel.through_lag else ("static" if static_slot else "add")
     theta, pred_f, jtj, r_w = _formula_fit(
-        prob.model, sel.flat0, prob, fm, (c0, logs0), bounds, sel.through_lag
+        prob.model, sel.flat0, prob, fm, (c0, logs0), bounds, mode
     )
     e_f = prob.val_residual(pred_f)
     _, _, sh_f, d_f, s_f = prob.interval(flex.e0, e_f, flex.blen)
@@ -1180,7 +1240,7 @@ def discover(
             pred_flex=flex.pred(prob, best),
         )
         if not sel.final:
-            for k in ("_keep", "_v", "_step"):
+            for k in ("_keep", "_per", "_v", "_step"):
                 out.shape.pop(k)
             out.message = (
                 "no formula found: no term of the dictionary is kept in "
@@ -1229,7 +1289,7 @@ def _base_jacobian(model, flat, cal) -> np.ndarray:
     return np.concatenate([np.asarray(jac(jnp.asarray(flat), e.jax_arrays())) for e in cal])
 
 
-def _formula_fit(model, flat0, prob, fm, start, bounds, through_lag=False):
+def _formula_fit(model, flat0, prob, fm, start, bounds, mode="add"):
     """The formula's members `fm` and the model calibrated jointly from `start`
     (coefficients, log shapes) within the log-shape `bounds`; returns θ, the prediction,
     the Jacobian of the weighted residual and the weighted residual."""
@@ -1239,7 +1299,7 @@ def _formula_fit(model, flat0, prob, fm, start, bounds, through_lag=False):
     w = np.zeros((len(exps), st["y"].shape[1]))
     for i, e in enumerate(exps[: prob.n_cal]):
         w[i, : e.n] = prob.scale
-    fns = tuple((m.kind.columns, m.kind.k, m.shape is not None, through_lag) for m in fm)
+    fns = tuple((m.kind.columns, m.kind.k, m.shape is not None, mode) for m in fm)
     theta, pred, jtj, r_w = _fit_formula(
         unravel(jnp.asarray(flat0)),
         static,
@@ -1286,26 +1346,21 @@ def _shape(
     for i, e in enumerate(exps[:n_cal]):
         d = {k: jnp.asarray(e.arrays[k])[None] for k in basis.keys}
         phi = np.asarray(_basis_values(basis, d))[0]
-        xs.append(np.asarray(e.arrays["t" if key in ("v*t", "s*t") else key]))
-        if pred_flex is None or key in ("v*t", "s*t"):
+        xs.append(np.asarray(e.arrays[key.split("*")[-1]]))
+        if pred_flex is None or "*" in key:
             fl.append(phi[:, sl] @ c[sl])
         else:
             fl.append(pred_flex[i, : e.n] - pred0[i, : e.n])
         pr.append(e.y - pred0[i, : e.n])
-        vs.append(np.asarray(e.arrays["s" if key == "s*t" else slots.keys[0]]))
+        vs.append(np.asarray(e.arrays[key.split("*")[0]]))
     x, f, r, v = (np.concatenate(z) for z in (xs, fl, pr, vs))
-    per_v = key in ("v*t", "s*t")
+    per_v = "*" in key
     keep = np.abs(v) > 0.3 * np.max(np.abs(v)) if per_v else np.ones(x.size, bool)
     if per_v:
         f, r = f / np.where(keep, v, 1.0), r / np.where(keep, v, 1.0)
     x, f, r = x[keep], f[keep], r[keep]
     step = max(1, x.size // 3000)
-    if key == "s*t":
-        ylabel = "heat flow per unit speed f(t) [K/rpm]"
-    elif per_v:
-        ylabel = "viscous coefficient f(t) [N·s/m]"
-    else:
-        ylabel = slots.ylabel
+    ylabel = slots.product_ylabels.get(key, slots.ylabel)
     return {
         "label": slots.axis_labels[key],
         "ylabel": ylabel,
@@ -1314,6 +1369,7 @@ def _shape(
         "flexible": f[::step],
         "partial": r[::step],
         "_keep": keep,
+        "_per": per_v,
         "_v": v,
         "_step": step,
     }
@@ -1324,6 +1380,6 @@ def _formula_on(exps, n_cal, pred_f, pred0, shape) -> np.ndarray:
     the fit without it), divided by `v` where the figure shows `f(t)`."""
     d = np.concatenate([pred_f[i, : e.n] - pred0[i, : e.n] for i, e in enumerate(exps[:n_cal])])
     keep, v = shape.pop("_keep"), shape.pop("_v")
-    if shape["ylabel"].startswith(("viscous", "heat flow per")):
+    if shape.pop("_per"):
         d = d / np.where(keep, v, 1.0)
     return d[keep][:: shape.pop("_step")]
