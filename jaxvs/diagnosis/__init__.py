@@ -21,6 +21,7 @@ from ._discover import (
     discover as discover,
 )
 from ._gapmap import GapCell as GapCell, gap_map as gap_map
+from ._next_experiment import NextExperiment as NextExperiment
 from ._report import DiagnosisReport as DiagnosisReport
 
 EFFECTS: dict[str, tuple[str, ...]] = {

@@ -71,6 +71,7 @@ from ..calibration import (
     lm_init,
     lm_running,
     lm_step,
+    log_evidence,
     stability_selection,
     unwrap,
 )
@@ -89,6 +90,7 @@ from ._dictionary import (
     tmf_output_dictionary,
     tmf_static_dictionary,
 )
+from ._next_experiment import DESIGN_FAMILIES, NextExperiment, design, limits_from
 from ._stats import (
     block_bootstrap_indices,
     block_length,
@@ -320,6 +322,14 @@ class Discovered:
     - `evidence`: the evidence used for the selection, in words.
     - `shape`: arrays for the figure (`x`, `partial`, `flexible`, `formula`, `label`).
     - `seconds`: wall time of the discovery.
+    - `next_experiment`: when a rival formula is within an evidence ratio of
+        `design_ratio` (10) on the records, the excitation that tells the two apart
+        ([`NextExperiment`][jaxvs.diagnosis.NextExperiment]: the reference signal, its
+        parameters, the predicted disagreement; drive and tmf); else `None`.
+        `save_next_experiment(path)` writes its signal as CSV.
+    - `rival`: the kept support (`formula`), its best rival with one term swapped
+        (`rival`) and the log evidence of the first over the second on the records
+        (`log_evidence_ratio`; negative: the rival is the more probable), or `None`.
     """
 
     slot: str
@@ -343,18 +353,29 @@ class Discovered:
     shape: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
     seconds: float = 0.0
     expression: Any = dataclasses.field(default=None, repr=False)
+    next_experiment: NextExperiment | None = dataclasses.field(default=None, repr=False)
+    rival: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The content of `report.json["discovered"]` (no arrays)."""
         out = {
             f.name: getattr(self, f.name)
             for f in dataclasses.fields(self)
-            if f.name not in ("shape", "expression")
+            if f.name not in ("shape", "expression", "next_experiment")
         }
+        nxt = self.next_experiment
+        out["next_experiment"] = None if nxt is None else nxt.to_json()
         for k in ("shrink_interval", "reduction_interval"):
             if out[k] is not None:
                 out[k] = [float(x) for x in out[k]]
         return out
+
+    def save_next_experiment(self, path) -> Any:
+        """Write the proposed next experiment's reference signal as CSV (`t`, signal);
+        returns the path, or `None` when there is no proposal."""
+        if self.next_experiment is None:
+            return None
+        return self.next_experiment.to_csv(path)
 
     def __repr__(self) -> str:
         if not self.fired:
@@ -793,7 +814,8 @@ class _Selection:
     Bs: np.ndarray
     flat0: np.ndarray
     through_lag: bool
-    limits: dict[str, float]  # a limit's lower bound (shape name -> median of its input)
+    limits: dict[str, float]
+    n_eff: float  # a limit's lower bound (shape name -> median of its input)
 
 
 # ------------------------------------------------------------------------------ steps
@@ -1035,7 +1057,7 @@ def _select(prob: _Problem, flex: _Flexible, best: str, rng) -> _Selection:
     # a limit (`L`, of the model's output) lies above the median of its input
     limits = {"L": float(np.median(np.abs(cal_d["yhat"])))} if "yhat" in cal_d else {}
     return _Selection(
-        members, X, final, freq, full, bounds, rows, Xs, rs, Bs, flat0, through_lag, limits
+        members, X, final, freq, full, bounds, rows, Xs, rs, Bs, flat0, through_lag, limits, n_eff
     )
 
 
@@ -1250,8 +1272,124 @@ def discover(
         else:
             say("discovery: recalibrating the formula")
             _recalibrate(prob, flex, sel, out)
+        if opts.design and fam.name in DESIGN_FAMILIES and not out.named_instead:
+            say("discovery: a rival formula, and the experiment that tells them apart")
+            out.rival, out.next_experiment = _design_next(prob, sel)
     out.seconds = time.perf_counter() - t0
     return out
+
+
+# ------------------------------------------------------------------------------ design
+
+
+def _support_fit(sel: _Selection, support, rows_x=None):
+    """Least squares of the record's residual on the base and the support's columns:
+    `(coefficients, ssr)`."""
+    A = np.concatenate([sel.Bs] + [sel.X[j][sel.rows] for j in support], 1)
+    coef, *_ = np.linalg.lstsq(A, sel.rs, rcond=None)
+    r = sel.rs - A @ coef
+    return coef, float(r @ r)
+
+
+def _rival(sel: _Selection, support) -> tuple[list[int], float] | None:
+    """The best rival of `support` (one term swapped for a term of a kind not in it) and
+    the log evidence of `support` over it."""
+    n_eff, p_b = sel.n_eff, sel.Bs.shape[1]
+    _, ssr0 = _support_fit(sel, [])
+
+    def ev(sup):
+        k = sum(sel.members[j].kind.k for j in sup)
+        return log_evidence(_support_fit(sel, sup)[1], ssr0, n_eff - p_b, k, n_eff)
+
+    kinds = {sel.members[j].kind.name for j in support}
+    best = None
+    for i in support:
+        for j, m in enumerate(sel.members):
+            if m.kind.name in kinds:
+                continue
+            sup = sorted([x for x in support if x != i] + [j])
+            e = ev(sup)
+            if best is None or e > best[1]:
+                best = (sup, e)
+    if best is None:
+        return None
+    return best[0], ev(support) - best[1]
+
+
+def _candidate_experiment(prob: _Problem, t, sig) -> Experiment:
+    """A slot experiment of the family on the candidate signal `sig` (relative to the
+    records' start position), the target zero."""
+    tpl = prob.calibration[0]
+    n = t.size
+    if prob.fam.name == "drive":
+        q = float(np.asarray(tpl.arrays["q"])[0]) + sig
+        v = np.gradient(q, t)
+        arrays = {"q": q, "v": v, "a": np.gradient(v, t), "y": np.zeros(n)}
+    else:
+        pos = float(np.asarray(tpl.arrays["pos_y"])[0])
+        arrays = {
+            "x_e": sig,
+            "pos_y": np.full(n, pos),
+            "f": np.zeros(n),
+            "f0": np.zeros(n),
+            "y": np.zeros(n),
+        }
+    e = dataclasses.replace(tpl, t=t, arrays=arrays, ops={}, masks={})
+    return _slot_experiment(e, prob.fam.name, prob.model)
+
+
+def _design_next(
+    prob: _Problem, sel: _Selection
+) -> tuple[dict[str, Any] | None, NextExperiment | None]:
+    """When a rival formula is within the evidence ratio `design_ratio` of the kept one,
+    the candidate excitation within the records' limits on which the two (each fitted
+    to the records with the model's Jacobian beside it) disagree most. The kept support
+    is the formula's, or where stability selection kept none, the full-data
+    elimination's (one member per kind)."""
+    support = list(sel.final)
+    if not support:
+        by_kind: dict[str, int] = {}
+        for j in sel.full.support:
+            by_kind.setdefault(sel.members[j].kind.name, j)
+        support = sorted(by_kind.values())
+    found = _rival(sel, support) if support else None
+    if found is None:
+        return None, None
+    rival, log_ratio = found
+
+    def label(sup):
+        return " + ".join(sel.members[j].label for j in sup)
+
+    info = {"formula": label(support), "rival": label(rival), "log_evidence_ratio": log_ratio}
+    if abs(log_ratio) >= math.log(prob.opts.design_ratio):
+        return info, None
+    fits = [(sup, _support_fit(sel, sup)[0]) for sup in (support, rival)]
+
+    def outputs(B, cols):
+        return [np.concatenate([B] + [cols[j] for j in sup], 1) @ coef for sup, coef in fits]
+
+    rec = outputs(sel.Bs, {j: sel.X[j][sel.rows] for j in range(len(sel.members))})
+    jac = _jacobian_fn(prob.model)
+    lim = limits_from(prob.fam.name, prob.cal)
+
+    def predict_pair(t, sig):
+        e = _candidate_experiment(prob, t, sig)
+        B = _base_jacobian(prob.model, sel.flat0, [e], jac)
+        used = set(support) | set(rival)
+        cols = {j: sel.members[j].evaluate(e.arrays) for j in used}
+        pair = outputs(B, cols)
+        if lim.force is not None and np.max(np.abs(e.arrays["yhat"] + pair[0])) > lim.force:
+            return None  # beyond the largest recorded force
+        return pair
+
+    return info, design(
+        prob.fam.name,
+        lim,
+        predict_pair,
+        rec[0] - rec[1],
+        (label(support), label(rival)),
+        log_ratio,
+    )
 
 
 def _num4(x) -> float:
@@ -1277,15 +1415,21 @@ def _member_columns(m: Member, cal: Sequence[Experiment], dyn) -> np.ndarray:
     return np.concatenate(cols)
 
 
-def _base_jacobian(model, flat, cal) -> np.ndarray:
-    """Jacobian of the model's prediction on the calibration samples with respect to its
-    free parameters (the columns the selection profiles out)."""
+def _jacobian_fn(model):
+    """`jac(flat, arrays)`: the Jacobian of the model's prediction with respect to its
+    free parameters (compiled once per array shape)."""
     _, unravel, static = _split(model)
 
     def pred(theta, d):
         return unwrap(eqx.combine(unravel(theta), static))(d)
 
-    jac = eqx.filter_jit(jax.jacfwd(pred))
+    return eqx.filter_jit(jax.jacfwd(pred))
+
+
+def _base_jacobian(model, flat, cal, jac=None) -> np.ndarray:
+    """Jacobian of the model's prediction on the calibration samples with respect to its
+    free parameters (the columns the selection profiles out)."""
+    jac = jac or _jacobian_fn(model)
     return np.concatenate([np.asarray(jac(jnp.asarray(flat), e.jax_arrays())) for e in cal])
 
 
