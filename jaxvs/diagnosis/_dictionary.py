@@ -20,10 +20,6 @@ Drive, slot `force` (an additional force on the axis; inputs: velocity `v`, posi
 | `ripple` | `sin(2πq/p)`, `cos(2πq/p)` | `p` | `position_dependence` |
 | `v·exp(-t/tau)` | `v·exp(−t/τ)` | `τ` | – |
 | `t`, `t^2` | `t`, `t²` | – | – |
-| `u-clip(u)` | `u − clip(u, ±F)` | `F` | `saturation` |
-
-`u − clip(u, ±F)` is the saturation of the inverse-dynamics model: the axis receives
-`clip(u, ±F)`, so the recorded force exceeds what the rigid axis needs by that amount.
 
 Thermal, slot `heat` (an additional heat flow into the bearing node, in kelvin of its
 static temperature rise: it passes through the bearing's lag when the model has one;
@@ -40,6 +36,16 @@ inputs: the speed `s = |v_m|` [rpm] over its top `s_max`, the temperatures `T_c`
 
 Thermal, slot `sensor` (an additive term of the bearing sensor, after the lag; input
 time): `exp(-t/tau)` (a thermocouple settling), `t`, `t^2` (a drift).
+
+Drive, slot `input` (an input nonlinearity `u → g(u)`; input the model's force `f_m`,
+array `yhat`): `clip(f_m)` (a dead zone, width `d`), `f_m-clip(f_m)` (a gain falling
+above `L`: `saturation`), `(f_m/fmax)^3`, `f_m|f_m|`.
+
+Tmf, slot `output` (an additive term of the tool-side motion; inputs `x_e`, its velocity
+`xd_e`, the motion's moving rms `amp`): `(x_e/xmax)^3`, `x_e|x_e|`, `sign(xdot_e)`,
+`tanh(xdot_e/v0)`, `x_e·(A/Amax)^p`. Slot `static` (a static nonlinearity of the model's
+output `x̂_t`, array `yhat`): `(xhat/xhatmax)^3`, `xhat|xhat|`, `xhat-clip(xhat)` (a
+clipped sensor or a travel stop, limit `L`).
 """
 
 from __future__ import annotations
@@ -452,7 +458,8 @@ def tmf_output_dictionary(d: Mapping[str, np.ndarray]) -> list[Member]:
         Member(_k_power("x_e", "x_e", xmax, "x_e|x_e|", _sabs, lambda z: z * _sym().Abs(z))),
         Member(sign),
     ]
-    out += [Member(_k_tanh_of("xd_e", "xdot_e", " m/s"), vmax * f) for f in (0.01, 0.03, 0.1, 0.3)]
+    grid = np.geomspace(0.005, 0.5, 9)  # a factor 1.8 between neighbours
+    out += [Member(_k_tanh_of("xd_e", "xdot_e", " m/s"), vmax * f) for f in grid]
     return out + [Member(_k_gain_amp(amax, p)) for p in (1, 2)]
 
 

@@ -47,6 +47,22 @@ an additive term of the bearing sensor in time (after the lag). `s·f(t)` holds 
 sensor's `f(t)` beside it and wins over it only by a held-out interval above zero. Its
 formula is built from the variables of the winning input (`_dictionary`). The thermal
 null is the calibrated model (its lag included) on the records' own inputs.
+
+The drive's second slot is its **input nonlinearity** `u → g(u)`: the axis receives
+`g(u)`, so the recorded force is `u = g⁻¹(f_m)` with `f_m` the force the model says the
+axis needs; its term is a function of the model's force (a dead zone, a gain that falls
+above a level). The tmf family has an **additive term of the tool-side output** in the
+encoder position, its velocity and `x_e·f(A)` (`A` the motion's moving rms: a gain that
+changes with the amplitude), and a **static output nonlinearity** `x_t = g(x̂_t)` of the
+model's output (a stiffening, a clipped sensor). A term in the model's output reads the
+calibrated model's output, held, in the flexible fits, and the model's output at every
+iterate in the formula's recalibration; the tmf null is the calibrated model on the
+records' own encoder motion.
+
+5. **The next experiment** (`_next_experiment`). When the kept support and its best rival
+   (one term swapped for a term of another kind) are within an evidence ratio of
+   `design_ratio` (10) on the records, the excitation within the records' limits on which
+   the two formulas' predictions differ most is proposed (drive and tmf).
 """
 
 from __future__ import annotations
