@@ -276,8 +276,10 @@ def test_bad_input_is_refused_with_the_fix():
         discover("model", [object()], [object()])
     with pytest.raises(ValueError, match="validation experiments are needed"):
         discover(model, [object()], [])
-    with pytest.raises(ValueError, match="no discovery slot yet"):
-        discover(model, [object()], [object()], family="tmf")
+    with pytest.raises(TypeError, match="unknown setting"):
+        discover(model, [object()], [object()], n_nul=3)
+    with pytest.raises(ValueError, match="design_ratio"):
+        discover(model, [object()], [object()], design_ratio=0.5)
     with pytest.raises(ValueError, match="DiagnosisReport"):
         discover(object())
     with pytest.raises(ValueError, match="n_null"):

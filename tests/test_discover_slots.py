@@ -33,8 +33,8 @@ def _tmf_plant(extra, n, seed, sigma=2e-8) -> Record:
 
 def _discover_tmf(extra) -> Discovered:
     fam = TMFFamily(order=2)
-    cal = [fam.prepare(_tmf_plant(extra, 4000, 0), "cal")]
-    val = [fam.prepare(_tmf_plant(extra, 2000, 1), "val")]
+    cal = [fam.prepare(_tmf_plant(extra, 3000, 0), "cal")]
+    val = [fam.prepare(_tmf_plant(extra, 1500, 1), "val")]
     return discover(
         GapModel(fam.nominal(cal)), cal, val, family=fam, n_null=3, n_boot=50, n_stability=10
     )
