@@ -245,6 +245,273 @@ def _figure(d, path: str) -> None:
     print(f"   figure: {path}")
 
 
+# ------------------------------------------------------------------------------ blind table
+#
+# Out-of-library cases per family whose true term is in the dictionary, cases whose true
+# term is not, effect-free cases and cases of a library effect. Every plant's term is
+# written here by hand (numpy), never through the dictionary's functions.
+
+TH_DT, TH_SMAX = 10.0, 12000.0
+
+
+def drive_plant(extra, n=25000, M=10.0, Fv=60.0, off=2.0, noise=0.5, seed=0) -> Record:
+    """The carriage in the PD loop by a fourth-order Runge–Kutta at 1 kHz (`extra(t, x,
+    v)` [N] opposes the motion), 0.5 N force noise, 1 µm encoder."""
+    rng = np.random.default_rng(seed)
+    h = 1 / FS
+    wn = 2 * np.pi * 15
+    kp, kd = M * wn**2, 2 * 0.7 * M * wn
+    tt = np.arange(2 * n + 1) * (h / 2)
+    r, dr = _ref(tt)
+
+    def f(s, k, ti):
+        u = kp * (r[k] - s[0]) + kd * (dr[k] - s[1])
+        return np.array([s[1], (u - Fv * s[1] - off - extra(ti, s[0], s[1])) / M])
+
+    out = np.zeros((n, 2))
+    s = np.array([r[0], dr[0]])
+    for k in range(n):
+        out[k] = s
+        ti = k * h
+        k1 = f(s, 2 * k, ti)
+        k2 = f(s + h / 2 * k1, 2 * k + 1, ti + h / 2)
+        k3 = f(s + h / 2 * k2, 2 * k + 1, ti + h / 2)
+        k4 = f(s + h * k3, 2 * k + 2, ti + h)
+        s = s + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    x, v = out.T
+    u = kp * (r[::2][:n] - x) + kd * (dr[::2][:n] - v) + noise * rng.normal(size=n)
+    return Record({"q": np.round(x / 1e-6) * 1e-6, "u": u}, dt=h)
+
+
+def _speed(t):
+    levels = np.array([6000, 6000, 12000, 3000, 9000, 0, 12000, 4500, 7500], float)
+    k = np.minimum((t // 5400).astype(int), levels.size - 2)
+    ramp = np.clip((t - 5400 * k) / 300.0, 0.0, 1.0)
+    return levels[k] + ramp * (levels[k + 1] - levels[k])
+
+
+def thermal_plant(heat=None, sensor=None, n=4320, noise=0.02, seed=0) -> Record:
+    """Two-node spindle (chassis τ = 40 min, bearing lag τ = 10 min) by `solve_ivp`,
+    12 h at 10 s; `heat(t, s)` [K] into the bearing node, `sensor(t)` [K] on its sensor."""
+    rng = np.random.default_rng(seed)
+    heat = heat or (lambda t, s: 0.0)
+    sensor = sensor or (lambda t: 0.0)
+
+    def air(t):
+        return 20.0 + 1.0 * np.sin(2 * np.pi * t / 14400.0 + 0.3)
+
+    def rhs(t, x):
+        s = _speed(np.array([t]))[0]
+        tc, tb = x
+        static = 2.0 + tc + 6.0 * s / TH_SMAX + heat(t, s)
+        return [(air(t) + 8.0 * s / TH_SMAX - tc) / 2400.0, (static - tb) / 600.0]
+
+    t = np.arange(n) * TH_DT
+    s0 = _speed(np.zeros(1))[0]
+    tc0 = air(0.0) + 8.0 * s0 / TH_SMAX
+    x0 = [tc0, 2.0 + tc0 + 6.0 * s0 / TH_SMAX + heat(0.0, s0)]
+    sol = si.solve_ivp(rhs, (0, t[-1]), x0, t_eval=t, rtol=1e-9, atol=1e-9, max_step=TH_DT)
+    tc, tb = sol.y
+    tb = tb + np.array([sensor(x) for x in t])
+    return Record(
+        {
+            "T_chassis": tc + noise * rng.normal(size=n),
+            "T_bearing": tb + noise * rng.normal(size=n),
+            "v_m": _speed(t),
+            "T_air": air(t) + noise * rng.normal(size=n),
+        },
+        dt=TH_DT,
+    )
+
+
+def tmf_plant(extra, n, seed, sigma=2e-8, dt=1e-3) -> Record:
+    """A random-phase multisine (1–80 Hz, 1 mm rms, amplitude modulated over 3 s, from
+    rest) through a 40 Hz mode (ζ = 0.05, zero-order hold, `lfilter`); `extra(x_e, ẋ_e,
+    x_t)` is the unknown part of the tool-side motion; white noise `sigma`."""
+    import scipy.signal as ss
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt
+    k = np.arange(1, 80)
+    xe = np.sum(np.cos(2 * np.pi * np.outer(t, k) + rng.uniform(0, 2 * np.pi, k.size)), 1)
+    xe = 1e-3 * xe / np.std(xe) * (0.6 + 0.4 * np.sin(2 * np.pi * t / 3.0))
+    xe = xe * np.clip(t / 0.2, 0, 1) ** 2
+    om, z = 2 * np.pi * 40.0, 0.05
+    b, a, _ = ss.cont2discrete(([om * om], [1, 2 * z * om, om * om]), dt, method="zoh")
+    xt = ss.lfilter(np.ravel(b), a, xe)
+    xt = xt + extra(xe, np.gradient(xe, dt), xt) + sigma * rng.standard_normal(n)
+    return Record({"x_e": xe, "x_t": xt}, dt=dt)
+
+
+# case: (family, plant keywords, truth) with truth None (effect-free), "named:<effect>"
+# (a library effect), "not in dictionary", or (kinds, coefficient, shape, point, value):
+# the kinds of the exact support, the coefficient and shape of its first term, or a
+# point of the slot's inputs where the formula must equal `value` (coefficient error
+# from the formula's value there)
+BLIND = {
+    "drive: viscous friction fading (40·v·e^(−t/8 s))": (
+        "drive",
+        dict(extra=lambda t, x, v: 40.0 * math.exp(-t / 8.0) * v),
+        (["v·exp(-t/tau)"], 40.0, 8.0, None, None),
+    ),
+    "drive: quadratic drag (800·v·|v|)": (
+        "drive",
+        dict(extra=lambda t, x, v: 800.0 * v * abs(v)),
+        (["v|v|"], 800.0, None, None, None),
+    ),
+    "drive: square-root friction (20·sign(v)·√|v|)": (
+        "drive",
+        dict(extra=lambda t, x, v: 20.0 * math.copysign(math.sqrt(abs(v)), v)),
+        (["sqrt|v|·sign(v)"], 20.0, None, None, None),
+    ),
+    "drive: guideway bump (Gaussian in q)": (
+        "drive",
+        dict(extra=lambda t, x, v: 15.0 * math.exp(-(((x - 0.01) / 0.006) ** 2))),
+        "not in dictionary",
+    ),
+    "drive: position ripple (library)": (
+        "drive",
+        dict(extra=lambda t, x, v: 6.0 * math.sin(2 * math.pi * x / 0.012)),
+        "named:position_dependence",
+    ),
+    "drive: none (seed 1)": ("drive", dict(extra=lambda t, x, v: 0.0, seed=1), None),
+    "drive: none (seed 2)": ("drive", dict(extra=lambda t, x, v: 0.0, seed=2), None),
+    "thermal: running-in heat (3·s/12000·e^(−t/3 h))": (
+        "thermal",
+        dict(heat=lambda t, s: 3.0 * s / TH_SMAX * math.exp(-t / 10800.0)),
+        (["(s/smax)·exp(-t/tau)"], 3.0, 10800.0, None, None),
+    ),
+    "thermal: settling thermocouple (0.8·e^(−t/2 h))": (
+        "thermal",
+        dict(sensor=lambda t: 0.8 * math.exp(-t / 7200.0)),
+        (["exp(-t/tau)"], 0.8, 7200.0, None, None),
+    ),
+    "thermal: sensor drift (0.6 K over 12 h)": (
+        "thermal",
+        dict(sensor=lambda t: 0.6 * t / 43200.0),
+        (["t"], 0.6 / 43200.0, None, None, None),
+    ),
+    "thermal: periodic sensor error (0.3·sin(2πt/5 h))": (
+        "thermal",
+        dict(sensor=lambda t: 0.3 * math.sin(2 * math.pi * t / 18000.0)),
+        "not in dictionary",
+    ),
+    "thermal: quadratic friction heat (library)": (
+        "thermal",
+        dict(heat=lambda t, s: 4.0 * (s / TH_SMAX) ** 2),
+        "named:speed_nonlinearity",
+    ),
+    "thermal: none (seed 1)": ("thermal", dict(seed=1), None),
+    "thermal: none (seed 2)": ("thermal", dict(seed=2), None),
+    "tmf: stiffening transmission (2e-5·(x_e/1 mm)³)": (
+        "tmf",
+        dict(extra=lambda xe, xd, xt: 2e-5 * (xe / 1e-3) ** 3),
+        (["(x_e/xmax)^3"], None, None, {"x_e": 1e-3}, 2e-5),
+    ),
+    "tmf: lost motion (3 µm·tanh(ẋ_e/10 mm/s))": (
+        "tmf",
+        dict(extra=lambda xe, xd, xt: 3e-6 * np.tanh(xd / 0.01)),
+        (["tanh(xdot_e/v0)"], 3e-6, 0.01, None, None),
+    ),
+    "tmf: clipped tool sensor (±2 mm)": (
+        "tmf",
+        dict(extra=lambda xe, xd, xt: np.clip(xt, -2e-3, 2e-3) - xt),
+        (["xhat-clip(xhat)"], -1.0, 2e-3, None, None),
+    ),
+    "tmf: encoder-periodic error (20 µm·sin(x_e/0.3 mm))": (
+        "tmf",
+        dict(extra=lambda xe, xd, xt: 2e-5 * np.sin(xe / 3e-4)),
+        "not in dictionary",
+    ),
+    "tmf: none (seed 1)": ("tmf", dict(extra=lambda xe, xd, xt: 0.0 * xe, seed=1), None),
+    "tmf: none (seed 2)": ("tmf", dict(extra=lambda xe, xd, xt: 0.0 * xe, seed=2), None),
+}
+
+
+def _blind_data(family, kw):
+    """`(family instance, model, calibration, validation)` of a blind case."""
+    from jaxvs.diagnosis._thermal import Dynamics, ThermalFamily
+    from jaxvs.diagnosis._tmf import TMFFamily
+
+    if family == "tmf":
+        seed = kw.get("seed", 0)
+        fam = TMFFamily(order=2)
+        cal = [fam.prepare(tmf_plant(kw["extra"], 17500, 10 * seed), "cal")]
+        val = [fam.prepare(tmf_plant(kw["extra"], 7500, 10 * seed + 1), "val")]
+        return fam, GapModel(fam.nominal(cal)), cal, val
+    rec = drive_plant(**kw) if family == "drive" else thermal_plant(**kw)
+    a, b = split_blocks(rec, (0.7, 0.3))
+    fam = DriveFamily() if family == "drive" else ThermalFamily()
+    cal, val = [fam.prepare(a, "cal")], [fam.prepare(b, "val")]
+    if family == "thermal":
+        # the model the named search leaves: the static regression with the bearing's lag
+        return (
+            fam,
+            GapModel(fam.nominal(cal), (Dynamics(jax.numpy.asarray(600.0), TH_DT),)),
+            cal,
+            val,
+        )
+    return fam, GapModel(fam.nominal(cal)), cal, val
+
+
+def _score(d, truth) -> dict:
+    """The case's answer against its truth."""
+    out = {"fired": d.fired, "found": d.found, "named": d.named_instead, "formula": d.formula}
+    kinds = [tm["kind"] for tm in d.terms]
+    new_formula = d.found and not d.named_instead
+    if truth is None:
+        out["ok"] = not new_formula
+    elif isinstance(truth, str) and truth.startswith("named:"):
+        out["ok"] = not new_formula
+    elif truth == "not in dictionary":
+        out["ok"] = not d.found and d.fired and d.shape.get("x") is not None
+    else:
+        want, coef, shape, point, value = truth
+        out["ok"] = new_formula and sorted(kinds) == sorted(want)
+        if out["ok"]:
+            tm = d.terms[0]
+            if point is not None:
+                sym = {str(s): s for s in d.expression.free_symbols}
+                got = float(d.expression.subs({sym[k]: v for k, v in point.items()}))
+                out["coef_err"] = abs(got / value - 1)
+            else:
+                out["coef_err"] = abs(tm["coefficients"][0] / coef - 1)
+            if shape is not None:
+                out["shape_err"] = abs(tm["shape"]["value"] / shape - 1)
+    return out
+
+
+def blind(only: str = "") -> None:
+    print(f"load average at start {os.getloadavg()}", flush=True)
+    rows = []
+    for name, (family, kw, truth) in BLIND.items():
+        if only and not any(o in name for o in only.split(",")):
+            continue
+        fam, model, cal, val = _blind_data(family, kw)
+        n = sum(e.n for e in cal + val)
+        c0 = time.process_time()
+        d = discover(model, cal, val, family=fam, n_null=19 if family != "tmf" else 9)
+        cpu = time.process_time() - c0
+        s = _score(d, truth)
+        s.update(case=name, family=family, truth=truth, cpu=cpu, n=n, load=os.getloadavg()[0])
+        rows.append(s)
+        ce = f"{s['coef_err']:.1%}" if "coef_err" in s else "–"
+        se = f"{s['shape_err']:.1%}" if "shape_err" in s else "–"
+        tru = truth if isinstance(truth, str) or truth is None else "in dictionary"
+        named = f" (named instead: {d.nearest_effect})" if d.found and d.named_instead else ""
+        print(
+            f"| {name} | {tru} | {d.input if d.fired else 'does not fire'} | "
+            f"{d.formula if d.found else ('no formula found' if d.fired else '–')}"
+            f"{named} | "
+            f"{'yes' if s['ok'] else 'no'} | {ce} | {se} | {cpu:.1f} s ({n} samples, load "
+            f"{s['load']:.1f}) |",
+            flush=True,
+        )
+        if d.rival is not None:
+            print(f"   rival: {d.rival}", flush=True)
+    print(f"load average at end {os.getloadavg()}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default="")
@@ -252,7 +519,11 @@ def main() -> None:
     ap.add_argument("--emps", action="store_true")
     ap.add_argument("--emps-official", action="store_true")
     ap.add_argument("--data", default=str(EMPS_DATA))
+    ap.add_argument("--blind", action="store_true")
     args = ap.parse_args()
+    if args.blind:
+        blind(args.only)
+        return
     if args.emps or args.emps_official:
         _, d = emps(Path(args.data), args.figure)
         if args.emps_official and d.found:

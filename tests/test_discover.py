@@ -165,7 +165,7 @@ def test_formula_coefficient_intervals_cover_the_truth():
     member = Member(_k_vexp(), 5.0)
     model = GapModel(RigidNominal(jnp.asarray(10.0), jnp.asarray(60.0), jnp.asarray(2.0)))
     flat, unravel, static = _split(model)
-    fns = ((member.kind.columns, 1, True, False),)
+    fns = ((member.kind.columns, 1, True, "add"),)
     hits = np.zeros(2)
     reps = 200
     for _ in range(reps):
@@ -176,10 +176,8 @@ def test_formula_coefficient_intervals_cover_the_truth():
             {k: jnp.asarray(v)[None] for k, v in d.items()},
             jnp.asarray(d["y"])[None],
             jnp.ones((1, n)),
-            jnp.asarray([30.0]),
-            jnp.asarray([math.log(5.0)]),
-            jnp.asarray([-jnp.inf]),
-            jnp.asarray([jnp.inf]),
+            (jnp.asarray([30.0]), jnp.asarray([math.log(5.0)])),
+            (jnp.asarray([-jnp.inf]), jnp.asarray([jnp.inf])),
             fns,
             100,
         )
@@ -278,8 +276,10 @@ def test_bad_input_is_refused_with_the_fix():
         discover("model", [object()], [object()])
     with pytest.raises(ValueError, match="validation experiments are needed"):
         discover(model, [object()], [])
-    with pytest.raises(ValueError, match="no discovery slot yet"):
-        discover(model, [object()], [object()], family="tmf")
+    with pytest.raises(TypeError, match="unknown setting"):
+        discover(model, [object()], [object()], n_nul=3)
+    with pytest.raises(ValueError, match="design_ratio"):
+        discover(model, [object()], [object()], design_ratio=0.5)
     with pytest.raises(ValueError, match="DiagnosisReport"):
         discover(object())
     with pytest.raises(ValueError, match="n_null"):

@@ -15,8 +15,13 @@ from ._base import (
 )
 from ._check import CheckReport as CheckReport, check as check
 from ._diagnose import FAMILIES as FAMILIES, diagnose as diagnose
-from ._discover import Discovered as Discovered, discover as discover
+from ._discover import (
+    Discovered as Discovered,
+    DiscoveryOptions as DiscoveryOptions,
+    discover as discover,
+)
 from ._gapmap import GapCell as GapCell, gap_map as gap_map
+from ._next_experiment import NextExperiment as NextExperiment
 from ._report import DiagnosisReport as DiagnosisReport
 
 EFFECTS: dict[str, tuple[str, ...]] = {

@@ -20,10 +20,6 @@ Drive, slot `force` (an additional force on the axis; inputs: velocity `v`, posi
 | `ripple` | `sin(2πq/p)`, `cos(2πq/p)` | `p` | `position_dependence` |
 | `v·exp(-t/tau)` | `v·exp(−t/τ)` | `τ` | – |
 | `t`, `t^2` | `t`, `t²` | – | – |
-| `u-clip(u)` | `u − clip(u, ±F)` | `F` | `saturation` |
-
-`u − clip(u, ±F)` is the saturation of the inverse-dynamics model: the axis receives
-`clip(u, ±F)`, so the recorded force exceeds what the rigid axis needs by that amount.
 
 Thermal, slot `heat` (an additional heat flow into the bearing node, in kelvin of its
 static temperature rise: it passes through the bearing's lag when the model has one;
@@ -40,6 +36,16 @@ inputs: the speed `s = |v_m|` [rpm] over its top `s_max`, the temperatures `T_c`
 
 Thermal, slot `sensor` (an additive term of the bearing sensor, after the lag; input
 time): `exp(-t/tau)` (a thermocouple settling), `t`, `t^2` (a drift).
+
+Drive, slot `input` (an input nonlinearity `u → g(u)`; input the model's force `f_m`,
+array `yhat`): `clip(f_m)` (a dead zone, width `d`), `f_m-clip(f_m)` (a gain falling
+above `L`: `saturation`), `(f_m/fmax)^3`, `f_m|f_m|`.
+
+Tmf, slot `output` (an additive term of the tool-side motion; inputs `x_e`, its velocity
+`xd_e`, the motion's moving rms `amp`): `(x_e/xmax)^3`, `x_e|x_e|`, `sign(xdot_e)`,
+`tanh(xdot_e/v0)`, `x_e·(A/Amax)^p`. Slot `static` (a static nonlinearity of the model's
+output `x̂_t`, array `yhat`): `(xhat/xhatmax)^3`, `xhat|xhat|`, `xhat-clip(xhat)` (a
+clipped sensor or a travel stop, limit `L`).
 """
 
 from __future__ import annotations
@@ -53,11 +59,15 @@ import numpy as np
 __all__ = [
     "DRIVE_NAMED",
     "THERMAL_NAMED",
+    "TMF_NAMED",
     "Kind",
     "Member",
     "drive_force_dictionary",
+    "drive_input_dictionary",
     "thermal_heat_dictionary",
     "thermal_sensor_dictionary",
+    "tmf_output_dictionary",
+    "tmf_static_dictionary",
 ]
 
 
@@ -207,18 +217,6 @@ def _k_t2():
     )
 
 
-def _k_clip():
-    return Kind(
-        "u-clip(u)",
-        lambda d, s, xp=jnp: _col(d["u"] - xp.clip(d["u"], -s, s)),
-        lambda c, s, x: c[0] * (x["u"] - _sym().Max(-_lim(s), _sym().Min(x["u"], _lim(s)))),
-        shape="F",
-        unit=" N",
-        named="saturation",
-        inputs=("u",),
-    )
-
-
 def _lim(s):
     return _sym().Float(f"{float(s):.4g}", 4)
 
@@ -233,7 +231,7 @@ DRIVE_NAMED: dict[str, frozenset[str]] = {
     "asymmetric_friction": frozenset({"sign(v)", "tanh(v/v0)", "|v|"}),
     "stribeck_friction": frozenset({"sign(v)", "tanh(v/v0)", "stribeck"}),
     "position_dependence": frozenset({"ripple"}),
-    "saturation": frozenset({"u-clip(u)"}),
+    "saturation": frozenset({"f_m-clip(f_m)"}),
 }
 """The kinds each named drive effect is made of (its support in the dictionary)."""
 
@@ -247,7 +245,6 @@ def drive_force_dictionary(d: Mapping[str, np.ndarray]) -> list[Member]:
     vmax = float(np.max(np.abs(d["v"])))
     span = float(np.ptp(d["q"]))
     tmax = float(np.max(d["t"]))
-    absu = np.abs(np.asarray(d["u"]))
     out = [Member(_k_sign())]
     out += [Member(_k_tanh(), vmax * f) for f in (0.005, 0.01, 0.02, 0.05, 0.1)]
     out += [Member(_k_stribeck(), vmax * f) for f in (0.02, 0.05, 0.1, 0.2, 0.3)]
@@ -259,11 +256,31 @@ def drive_force_dictionary(d: Mapping[str, np.ndarray]) -> list[Member]:
         for f in (0.05, 0.1, 0.15, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
     ]
     out += [Member(_k_t()), Member(_k_t2())]
-    out += [
-        Member(_k_clip(), float(np.quantile(absu, q)))
-        for q in (0.6, 0.7, 0.8, 0.85, 0.9, 0.95, 0.98)
-    ]
     return out
+
+
+def drive_input_dictionary(d: Mapping[str, np.ndarray]) -> list[Member]:
+    """The drive's input-nonlinearity slot: the axis receives `g(u)`, so the recorded
+    force is `u = g⁻¹(f_m)`, `f_m` the force the model says the axis needs (`d["yhat"]`).
+    A dead zone (the axis receives `u ∓ d` beyond `±d`) is `u = f_m + clip(f_m, ±d)`-like,
+    widths `d` at low quantiles of `|f_m|`; a gain that falls above a level (a soft
+    saturation of the amplifier) is `u = f_m + c·(f_m − clip(f_m, ±L))`, `L` at high
+    quantiles; a gain that changes with the force (a motor constant falling with the
+    current) `(f_m/f_max)³`, `f_m|f_m|/f_max²`."""
+    y = np.abs(np.asarray(d["yhat"]))
+    fmax = float(np.max(y))
+    out = [
+        Member(_k_power("yhat", "f_m", fmax, "(f_m/fmax)^3", _cube, lambda z: z**3)),
+        Member(_k_power("yhat", "f_m", fmax, "f_m|f_m|", _sabs, lambda z: z * _sym().Abs(z))),
+    ]
+    out += [
+        Member(_k_out_clip("f_m", " N", "f_m"), float(np.quantile(y, q)))
+        for q in (0.6, 0.7, 0.8, 0.9, 0.95)
+    ]
+    return out + [
+        Member(_k_deadzone("f_m", " N"), float(np.quantile(y, q)))
+        for q in (0.02, 0.05, 0.1, 0.2, 0.3)
+    ]
 
 
 def _k_speed_power(smax: float, p: float):
@@ -349,6 +366,116 @@ def thermal_heat_dictionary(d: Mapping[str, np.ndarray]) -> list[Member]:
         if float(np.ptp(d[key] - d["T_chassis"])) > 0 and float(np.ptp(d[key])) > 0:
             out.append(Member(_k_tdiff(key, sym, named)))
     return out + thermal_sensor_dictionary(d)
+
+
+# ------------------------------------------------------------------------------ tmf
+
+TMF_NAMED: dict[str, frozenset[str]] = {}
+"""The tmf library's effects are linear (a mode, a delay, a position or force
+dependence of the TMF): no term of the tmf slots' dictionaries belongs to one."""
+
+
+def _k_power(key: str, sym: str, scale: float, name: str, fn, sym_fn):
+    """A power-like kind of the input `key` over its `scale`: `fn(x/scale)`."""
+    return Kind(
+        name,
+        lambda d, s, xp=jnp: _col(fn(d[key] / scale, xp)),
+        lambda c, s, x: c[0] * sym_fn(x[sym] / _num(scale)),
+        inputs=(key,),
+    )
+
+
+def _cube(z, xp=jnp):
+    return z**3
+
+
+def _sabs(z, xp=jnp):
+    return z * xp.abs(z)
+
+
+def _k_tanh_of(key: str, sym: str, unit: str):
+    return Kind(
+        f"tanh({sym}/v0)",
+        lambda d, s, xp=jnp: _col(xp.tanh(d[key] / s)),
+        lambda c, s, x: c[0] * _sym().tanh(x[sym] / _num(s)),
+        shape="v0",
+        unit=unit,
+        inputs=(key,),
+    )
+
+
+def _k_gain_amp(amax: float, p: int):
+    """A gain that grows with the motion's amplitude `A`: `x_e·(A/A_max)^p`."""
+    return Kind(
+        f"x_e·(A/Amax)^{p}",
+        lambda d, s, xp=jnp: _col(d["x_e"] * (d["amp"] / amax) ** p),
+        lambda c, s, x: c[0] * x["x_e"] * (x["A"] / _num(amax)) ** p,
+        inputs=("x_e", "amp"),
+    )
+
+
+def _k_out_clip(sym: str = "xhat_t", unit: str = " m", label: str = "xhat"):
+    """`ŷ − clip(ŷ, ±L)` of the model's output `ŷ` (array `yhat`, symbol `sym`)."""
+    return Kind(
+        f"{label}-clip({label})",
+        lambda d, s, xp=jnp: _col(d["yhat"] - xp.clip(d["yhat"], -s, s)),
+        lambda c, s, x: c[0] * (x[sym] - _sym().Max(-_lim(s), _sym().Min(x[sym], _lim(s)))),
+        shape="L",
+        unit=unit,
+        inputs=("yhat",),
+    )
+
+
+def _k_deadzone(sym: str, unit: str):
+    """`clip(ŷ, ±d)` of the model's output `ŷ` (a dead zone of width `d`)."""
+    return Kind(
+        f"clip({sym})",
+        lambda d, s, xp=jnp: _col(xp.clip(d["yhat"], -s, s)),
+        lambda c, s, x: c[0] * _sym().Max(-_lim(s), _sym().Min(x[sym], _lim(s))),
+        shape="d",
+        unit=unit,
+        inputs=("yhat",),
+    )
+
+
+def tmf_output_dictionary(d: Mapping[str, np.ndarray]) -> list[Member]:
+    """The tmf's additive output slot (`x_t = T(s) x_e + h(x_e, ẋ_e, A)`): a stiffening
+    or softening transmission (`(x_e/x_max)³`, `x_e|x_e|/x_max²`), a friction-like lost
+    motion between encoder and tool (`tanh(ẋ_e/v₀)` with `v₀` as fractions of the top
+    encoder speed, `sign(ẋ_e)`) and a gain that changes with the motion's amplitude
+    (`x_e·(A/A_max)^p`, p = 1, 2). Inputs `x_e`, `xd_e`, `amp` (the slot experiment's)."""
+    xmax = float(np.max(np.abs(d["x_e"])))
+    vmax = float(np.max(np.abs(d["xd_e"])))
+    amax = float(np.max(d["amp"]))
+    sign = Kind(
+        "sign(xdot_e)",
+        lambda d_, s, xp=jnp: _col(xp.sign(d_["xd_e"])),
+        lambda c, s, x: c[0] * _sym().sign(x["xdot_e"]),
+        inputs=("xd_e",),
+    )
+    out = [
+        Member(_k_power("x_e", "x_e", xmax, "(x_e/xmax)^3", _cube, lambda z: z**3)),
+        Member(_k_power("x_e", "x_e", xmax, "x_e|x_e|", _sabs, lambda z: z * _sym().Abs(z))),
+        Member(sign),
+    ]
+    grid = np.geomspace(0.005, 0.5, 9)  # a factor 1.8 between neighbours
+    out += [Member(_k_tanh_of("xd_e", "xdot_e", " m/s"), vmax * f) for f in grid]
+    return out + [Member(_k_gain_amp(amax, p)) for p in (1, 2)]
+
+
+def tmf_static_dictionary(d: Mapping[str, np.ndarray]) -> list[Member]:
+    """The tmf's static output nonlinearity (`x_t = g(x̂_t)`, `x̂_t` the calibrated TMF's
+    output): `(x̂/x̂_max)³`, `x̂|x̂|/x̂_max²` and a clipped sensor or a travel stop
+    `x̂ − clip(x̂, ±L)` with `L` at high quantiles of `|x̂|`."""
+    y = np.asarray(d["yhat"])
+    ymax = float(np.max(np.abs(y)))
+    out = [
+        Member(_k_power("yhat", "xhat_t", ymax, "(xhat/xhatmax)^3", _cube, lambda z: z**3)),
+        Member(_k_power("yhat", "xhat_t", ymax, "xhat|xhat|", _sabs, lambda z: z * _sym().Abs(z))),
+    ]
+    return out + [
+        Member(_k_out_clip(), float(np.quantile(np.abs(y), q))) for q in (0.7, 0.8, 0.9, 0.95)
+    ]
 
 
 def nearest_named(

@@ -47,6 +47,22 @@ an additive term of the bearing sensor in time (after the lag). `s·f(t)` holds 
 sensor's `f(t)` beside it and wins over it only by a held-out interval above zero. Its
 formula is built from the variables of the winning input (`_dictionary`). The thermal
 null is the calibrated model (its lag included) on the records' own inputs.
+
+The drive's second slot is its **input nonlinearity** `u → g(u)`: the axis receives
+`g(u)`, so the recorded force is `u = g⁻¹(f_m)` with `f_m` the force the model says the
+axis needs; its term is a function of the model's force (a dead zone, a gain that falls
+above a level). The tmf family has an **additive term of the tool-side output** in the
+encoder position, its velocity and `x_e·f(A)` (`A` the motion's moving rms: a gain that
+changes with the amplitude), and a **static output nonlinearity** `x_t = g(x̂_t)` of the
+model's output (a stiffening, a clipped sensor). A term in the model's output reads the
+calibrated model's output, held, in the flexible fits, and the model's output at every
+iterate in the formula's recalibration; the tmf null is the calibrated model on the
+records' own encoder motion.
+
+5. **The next experiment** (`_next_experiment`). When the kept support and its best rival
+   (one term swapped for a term of another kind) are within an evidence ratio of
+   `design_ratio` (10) on the records, the excitation within the records' limits on which
+   the two formulas' predictions differ most is proposed (drive and tmf).
 """
 
 from __future__ import annotations
@@ -71,20 +87,26 @@ from ..calibration import (
     lm_init,
     lm_running,
     lm_step,
+    log_evidence,
     stability_selection,
     unwrap,
 )
 from ..signal import bspline_basis, difference_penalty, quantile_knots
-from ._base import Experiment, GapModel
+from ._base import Experiment, GapModel, predict
 from ._dictionary import (
     DRIVE_NAMED,
     THERMAL_NAMED,
+    TMF_NAMED,
     Member,
     drive_force_dictionary,
+    drive_input_dictionary,
     nearest_named,
     thermal_heat_dictionary,
     thermal_sensor_dictionary,
+    tmf_output_dictionary,
+    tmf_static_dictionary,
 )
+from ._next_experiment import DESIGN_FAMILIES, NextExperiment, design, limits_from
 from ._stats import (
     block_bootstrap_indices,
     block_length,
@@ -95,14 +117,17 @@ from ._stats import (
 )
 from ._thermal import first_order_lag
 
-__all__ = ["SLOT_FAMILIES", "Discovered", "discover"]
+__all__ = ["SLOT_FAMILIES", "Discovered", "DiscoveryOptions", "discover"]
 
 # the families with a discovery slot (the others report that discovery was not run)
-SLOT_FAMILIES = ("drive", "thermal")
+SLOT_FAMILIES = ("drive", "thermal", "tmf")
 
 SLOT_FORCE = "additional force on the axis"
+SLOT_INPUT = "input nonlinearity u → g(u)"
 SLOT_HEAT = "additional heat flow into the bearing node"
 SLOT_SENSOR = "additive term of the bearing sensor"
+SLOT_OUTPUT = "additive term of the tool-side output"
+SLOT_STATIC = "static output nonlinearity"
 
 # slot inputs of the drive's force slot: label -> array key (the product `v·f(t)` is the
 # viscous coefficient varying in time)
@@ -116,7 +141,24 @@ _DRIVE_INPUTS = {
 # The recorded force `u` is the target of the inverse-dynamics model: every unmodelled
 # force is in it, so a flexible term in `u` gains on any gap (not only an input
 # nonlinearity) and cannot say where the gap enters. It is left out of the additive
-# slot; the input nonlinearity `u → g(u)` is its own slot (`"force"` in `_Basis`).
+# slot, and so is a term in it for the input nonlinearity: the axis receives `g(u)`, so
+# the recorded force is `u = g⁻¹(f_m)` with `f_m` the force the model says the axis
+# needs; the slot's term is a function of the model's force `f_m` (the calibrated model's
+# output, held for the flexible term, the model's own output in the formula's
+# recalibration), free of the force's noise.
+_DRIVE_INPUT_INPUTS = {"force": "yhat"}
+
+# slot inputs of the tmf slots: an additive term of the tool-side output in the encoder's
+# position, velocity and the encoder position times a function of the motion's amplitude
+# (a transmission that stiffens with the amplitude), and a static nonlinearity of the
+# model's output (the calibrated TMF's prediction, held: the basis stays linear and known,
+# as the thermal lag is held).
+_TMF_OUTPUT_INPUTS = {
+    "encoder position": "x_e",
+    "encoder velocity": "xd_e",
+    "x_e·f(amplitude)": "x_e*amp",
+}
+_TMF_STATIC_INPUTS = {"model output": "yhat"}
 
 # slot inputs of the thermal slots: label -> array key. The heat flow enters the bearing
 # node (before its lag, when the model has one); the sensor term is added after it. A heat
@@ -151,24 +193,30 @@ class _Slots:
     axis_labels: dict[str, str]
     ylabel: str
     nested: dict[str, str] = dataclasses.field(default_factory=dict)
+    # the figure's y label of a product input `a*b` (the term over `a`, against `b`)
+    product_ylabels: dict[str, str] = dataclasses.field(default_factory=dict)
 
 
 _DRIVE_SLOTS = _Slots(
-    inputs=_DRIVE_INPUTS,
-    slot_of=dict.fromkeys(_DRIVE_INPUTS, SLOT_FORCE),
+    inputs={**_DRIVE_INPUTS, **_DRIVE_INPUT_INPUTS},
+    slot_of=dict.fromkeys(_DRIVE_INPUTS, SLOT_FORCE)
+    | dict.fromkeys(_DRIVE_INPUT_INPUTS, SLOT_INPUT),
     lagged=frozenset(),
-    keys=("v", "q", "a", "u", "t"),
-    dictionaries={SLOT_FORCE: drive_force_dictionary},
+    keys=("v", "q", "a", "u", "t", "yhat"),
+    dictionaries={SLOT_FORCE: drive_force_dictionary, SLOT_INPUT: drive_input_dictionary},
     named=DRIVE_NAMED,
-    symbols={k: k for k in ("v", "q", "a", "u", "t")},
+    symbols={k: k for k in ("v", "q", "a", "u", "t")} | {"yhat": "f_m"},
     axis_labels={
         "v": "velocity [m/s]",
         "q": "position [m]",
         "a": "acceleration [m/s²]",
         "t": "time [s]",
         "v*t": "time [s]",
+        "u": "recorded force u [N]",
+        "yhat": "model force f_m [N]",
     },
     ylabel="additional force [N]",
+    product_ylabels={"v*t": "viscous coefficient f(t) [N·s/m]"},
 )
 
 
@@ -177,7 +225,7 @@ def _thermal_slots(cal: Sequence[Experiment], lag: Any) -> _Slots:
     columns pass through the model's lag when it has one."""
 
     def varies(key):
-        src = "s" if key == "s*t" else key
+        src = key.split("*")[0]
         x = np.concatenate([np.asarray(e.arrays[src], float) for e in cal])
         return float(np.ptp(x)) > 0
 
@@ -203,7 +251,40 @@ def _thermal_slots(cal: Sequence[Experiment], lag: Any) -> _Slots:
         ylabel="additional bearing temperature [K]",
         # a heat flow in speed and time holds the sensor's term in time beside it
         nested={"speed·f(time)": "time (sensor)"},
+        product_ylabels={"s*t": "heat flow per unit speed f(t) [K/rpm]"},
     )
+
+
+_TMF_SLOTS = _Slots(
+    inputs={**_TMF_OUTPUT_INPUTS, **_TMF_STATIC_INPUTS},
+    slot_of=dict.fromkeys(_TMF_OUTPUT_INPUTS, SLOT_OUTPUT)
+    | dict.fromkeys(_TMF_STATIC_INPUTS, SLOT_STATIC),
+    lagged=frozenset(),
+    keys=("x_e", "xd_e", "amp", "yhat", "t"),
+    dictionaries={SLOT_OUTPUT: tmf_output_dictionary, SLOT_STATIC: tmf_static_dictionary},
+    named=TMF_NAMED,
+    symbols={"x_e": "x_e", "xd_e": "xdot_e", "amp": "A", "yhat": "xhat_t", "t": "t"},
+    axis_labels={
+        "x_e": "encoder position x_e [m]",
+        "xd_e": "encoder velocity [m/s]",
+        "x_e*amp": "x_e amplitude A [m]",
+        "yhat": "model output x̂_t [m]",
+        "t": "time [s]",
+    },
+    ylabel="additional tool-side motion [m]",
+    # a gain that changes with the amplitude holds a static term in x_e beside it
+    nested={"x_e·f(amplitude)": "encoder position"},
+    product_ylabels={"x_e*amp": "additional gain f(A) [m/m]"},
+)
+
+
+def _family_slots(name: str, cal: Sequence[Experiment], lag: Any) -> _Slots:
+    """The slots of the family `name` on the calibration slot experiments."""
+    if name == "thermal":
+        return _thermal_slots(cal, lag)
+    if name == "tmf":
+        return _TMF_SLOTS
+    return _DRIVE_SLOTS
 
 
 def _dynamics(model: GapModel):
@@ -257,6 +338,14 @@ class Discovered:
     - `evidence`: the evidence used for the selection, in words.
     - `shape`: arrays for the figure (`x`, `partial`, `flexible`, `formula`, `label`).
     - `seconds`: wall time of the discovery.
+    - `next_experiment`: when a rival formula is within an evidence ratio of
+        `design_ratio` (10) on the records, the excitation that tells the two apart
+        ([`NextExperiment`][jaxvs.diagnosis.NextExperiment]: the reference signal, its
+        parameters, the predicted disagreement; drive and tmf); else `None`.
+        `save_next_experiment(path)` writes its signal as CSV.
+    - `rival`: the kept support (`formula`), its best rival with one term swapped
+        (`rival`) and the log evidence of the first over the second on the records
+        (`log_evidence_ratio`; negative: the rival is the more probable), or `None`.
     """
 
     slot: str
@@ -280,18 +369,29 @@ class Discovered:
     shape: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
     seconds: float = 0.0
     expression: Any = dataclasses.field(default=None, repr=False)
+    next_experiment: NextExperiment | None = dataclasses.field(default=None, repr=False)
+    rival: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The content of `report.json["discovered"]` (no arrays)."""
         out = {
             f.name: getattr(self, f.name)
             for f in dataclasses.fields(self)
-            if f.name not in ("shape", "expression")
+            if f.name not in ("shape", "expression", "next_experiment")
         }
+        nxt = self.next_experiment
+        out["next_experiment"] = None if nxt is None else nxt.to_json()
         for k in ("shrink_interval", "reduction_interval"):
             if out[k] is not None:
                 out[k] = [float(x) for x in out[k]]
         return out
+
+    def save_next_experiment(self, path) -> Any:
+        """Write the proposed next experiment's reference signal as CSV (`t`, signal);
+        returns the path, or `None` when there is no proposal."""
+        if self.next_experiment is None:
+            return None
+        return self.next_experiment.to_csv(path)
 
     def __repr__(self) -> str:
         if not self.fired:
@@ -306,16 +406,26 @@ class Discovered:
 # ------------------------------------------------------------------------------ data
 
 
-def _slot_experiment(e: Experiment, family: str = "drive") -> Experiment:
+def _slot_experiment(e: Experiment, family: str = "drive", model: Any = None) -> Experiment:
     """The experiment with the slot inputs the family's model does not read: time `t` [s]
-    (the record's own), and for the drive the recorded force `u` (the target), for
-    the thermal family the speed `s = |v_m|`."""
+    (the record's own), and for the drive the recorded force `u` (the target) and the
+    calibrated `model`'s force `yhat`, for
+    the thermal family the speed `s = |v_m|`, for the tmf family the encoder velocity
+    `xd_e`, the motion's amplitude `amp` (the moving rms of `x_e` over 50 ms) and the
+    calibrated `model`'s output `yhat`."""
     arrays = dict(e.arrays)
     arrays["t"] = np.asarray(e.t, float)
     if family == "thermal":
         arrays["s"] = np.abs(np.asarray(e.arrays["v_m"], float))
+    elif family == "tmf":
+        xe = np.asarray(e.arrays["x_e"], float)
+        arrays["xd_e"] = np.gradient(xe, e.dt)
+        w = max(4, int(round(0.05 / e.dt)))
+        arrays["amp"] = np.sqrt(np.convolve((xe - xe.mean()) ** 2, np.ones(w) / w, mode="same"))
+        arrays["yhat"] = predict(model, e)
     else:
         arrays["u"] = np.asarray(e.arrays["y"], float)
+        arrays["yhat"] = predict(model, e)
     return dataclasses.replace(e, arrays=arrays)
 
 
@@ -353,20 +463,13 @@ class _Basis:
         self.blocks: dict[str, slice] = {}
         k0 = 0
         for label, key in self.inputs.items():
-            src = "t" if key in ("v*t", "s*t") else key
+            src = key.split("*")[-1]
             x = np.concatenate([np.asarray(e.arrays[src], float) for e in cal])
-            if key == "u":
-                # the recorded force is the target: a term in it may not contain the
-                # identity (it would predict the force from itself), so only its excess
-                # beyond levels at high quantiles acts, on each side: `(u − k)₊`, `(u + k)₋`
-                self.knots[label] = np.quantile(np.abs(x), (0.5, 0.7, 0.8, 0.9, 0.95))
-                k = 2 * self.knots[label].size
-            else:
-                # a ripple of many periods over the travel needs many knots in position
-                nb = {"v*t": max(4, n_basis - 2), "s*t": max(4, n_basis - 2), "q": 3 * n_basis}
-                nb = nb.get(key, n_basis)
-                self.knots[label] = quantile_knots(x, nb)
-                k = self.knots[label].size - 4
+            # a ripple of many periods over the travel needs many knots in position
+            nb = 3 * n_basis if key == "q" else n_basis
+            nb = max(4, n_basis - 2) if "*" in key else nb
+            self.knots[label] = quantile_knots(x, nb)
+            k = self.knots[label].size - 4
             self.blocks[label] = slice(k0, k0 + k)
             k0 += k
         self.size = k0
@@ -374,12 +477,9 @@ class _Basis:
     def __call__(self, d: Mapping[str, Any]) -> jnp.ndarray:
         cols = []
         for label, key in self.inputs.items():
-            if key in ("v*t", "s*t"):
-                b = jnp.asarray(d[key[0]])[:, None] * bspline_basis(d["t"], self.knots[label])
-            elif key == "u":
-                u = jnp.asarray(d["u"])[:, None]
-                lv = jnp.asarray(self.knots[label])[None, :]
-                b = jnp.concatenate([jnp.maximum(u - lv, 0.0), jnp.minimum(u + lv, 0.0)], -1)
+            if "*" in key:
+                a, b_ = key.split("*")
+                b = jnp.asarray(d[a])[:, None] * bspline_basis(d[b_], self.knots[label])
             else:
                 b = bspline_basis(d[key], self.knots[label])
             cols.append(b)
@@ -390,8 +490,6 @@ class _Basis:
         for label, key in self.inputs.items():
             sl = self.blocks[label]
             k = sl.stop - sl.start
-            if key == "u":
-                continue  # hinges: the ridge only
             d2 = np.zeros((k - 2, self.size))
             d2[:, sl] = difference_penalty(k, 2)
             rows.append(math.sqrt(lam * n / k) * d2)
@@ -545,23 +643,28 @@ def _screen(members: list[Member], X: list[np.ndarray], B: np.ndarray, r: np.nda
 
 
 @eqx.filter_jit
-def _fit_formula(params, static, inputs, y, wfit, coefs0, logs0, lo, hi, fns, max_steps):
-    """Model and formula calibrated jointly by LM; shapes in log. Returns θ, the
-    prediction, the Jacobian of the weighted residual and the weighted residual."""
+def _fit_formula(params, static, inputs, y, wfit, start, bounds, fns, max_steps):
+    """Model and formula calibrated jointly by LM from `start = (coefficients, log
+    shapes)`, the log shapes within `bounds = (lo, hi)`. Returns θ, the prediction, the
+    Jacobian of the weighted residual and the weighted residual."""
+    coefs0, logs0 = start
+    lo, hi = bounds
     flat, unravel = ravel_pytree(params)
     p, k = flat.size, coefs0.size
 
-    def formula(c, logs, d, dyn):
-        # terms of a heat flow (flag `lagged`) pass through the model's lag `dyn`
+    def formula(c, logs, d, dyn, ym):
+        # terms of a heat flow (mode "lag") pass through the model's lag `dyn`; terms of
+        # a static output nonlinearity (mode "static") read the model's own output
         out, heat, i = 0.0, 0.0, 0
-        for j, (fn, ncol, _, lagged) in enumerate(fns):
-            term = fn(d, jnp.exp(logs[j])) @ c[i : i + ncol]
-            if lagged:
+        d_static = {**d, "yhat": ym}
+        for j, (fn, ncol, _, mode) in enumerate(fns):
+            term = fn(d_static if mode == "static" else d, jnp.exp(logs[j])) @ c[i : i + ncol]
+            if mode == "lag":
                 heat = heat + term
             else:
                 out = out + term
             i += ncol
-        if dyn is not None and any(f[3] for f in fns):
+        if dyn is not None and any(f[3] == "lag" for f in fns):
             out = out + _lag(heat, dyn)
         else:
             out = out + heat
@@ -571,7 +674,12 @@ def _fit_formula(params, static, inputs, y, wfit, coefs0, logs0, lo, hi, fns, ma
         m = unwrap(eqx.combine(unravel(theta[:p]), static))
         c, logs = theta[p : p + k], theta[p + k :]
         dyn = _dynamics(m)
-        return jax.vmap(lambda d: m(d) + formula(c, logs, d, dyn))(inputs)
+
+        def one(d):
+            ym = m(d)
+            return ym + formula(c, logs, d, dyn, ym)
+
+        return jax.vmap(one)(inputs)
 
     # the log shape of a shapeless kind is carried with a zero Jacobian: LM leaves it
     def resid(theta, args):
@@ -591,37 +699,14 @@ def _fit_formula(params, static, inputs, y, wfit, coefs0, logs0, lo, hi, fns, ma
     return st.theta, predict(st.theta), st.jtj, resid(st.theta, None)
 
 
-# ------------------------------------------------------------------------------ entry
+# ------------------------------------------------------------------------------ options
 
 
-def discover(
-    report_or_model: Any,
-    calibration: Sequence[Experiment] | None = None,
-    validation: Sequence[Experiment] | None = None,
-    *,
-    family: Any = "drive",
-    n_null: int = 19,
-    n_boot: int = 200,
-    n_stability: int = 50,
-    stability: float = 0.8,
-    min_shrink: float = 0.05,
-    min_share: float = 0.8,
-    min_evidence: float = 5.0,
-    n_basis: int = 8,
-    seed: int = 0,
-    progress: Any = None,
-) -> Discovered:
-    """Discover an effect outside the library: a flexible term in the family's slot,
-    scored against the null, then its formula from a typed dictionary (module doc).
+@dataclasses.dataclass(frozen=True)
+class DiscoveryOptions:
+    """The settings of [`discover`][jaxvs.diagnosis.discover] (frozen; `replace` with
+    `dataclasses.replace`).
 
-    **Arguments:**
-
-    - `report_or_model`: a [`DiagnosisReport`][jaxvs.diagnosis.DiagnosisReport] of
-        `jaxvs.diagnose` (its final model and experiments are used), or a calibrated
-        `GapModel`, with `calibration` and `validation` its prepared experiments (held
-        out: the validation experiments are never fitted).
-    - `family`: the family name (`"drive"`, `"thermal"`) or instance; taken from the
-        report.
     - `n_null`: effect-free records the discovery step is run on (the null that pays
         for the choice of the input; default 19: the 95th percentile is about their
         largest); `0` skips the null (threshold 0; for tests of the formula only).
@@ -636,14 +721,126 @@ def discover(
         named effects pass).
     - `n_basis`: B-splines per slot input (cubic, default 8).
     - `seed`: seed of the null records and the resamples.
-    - `progress`: optional `callable(str)` told what runs.
-
-    **Returns:** a [`Discovered`][jaxvs.diagnosis.Discovered].
+    - `design`: propose the next experiment when two formulas are within an evidence
+        ratio of `design_ratio` (default 10) on the records.
     """
+
+    n_null: int = 19
+    n_boot: int = 200
+    n_stability: int = 50
+    stability: float = 0.8
+    min_shrink: float = 0.05
+    min_share: float = 0.8
+    min_evidence: float = 5.0
+    n_basis: int = 8
+    seed: int = 0
+    design: bool = True
+    design_ratio: float = 10.0
+
+    def __post_init__(self):
+        if not (isinstance(self.n_null, int) and self.n_null >= 0):
+            raise ValueError(f"discover: n_null must be an integer >= 0; got {self.n_null!r}.")
+        if not 0 < self.stability <= 1:
+            raise ValueError(f"discover: stability must lie in (0, 1]; got {self.stability!r}.")
+        for name in ("n_boot", "n_stability", "n_basis"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= 1):
+                raise ValueError(f"discover: {name} must be an integer >= 1; got {v!r}.")
+        if not self.design_ratio >= 1:
+            raise ValueError(
+                f"discover: design_ratio must be >= 1 (an evidence ratio); got "
+                f"{self.design_ratio!r}."
+            )
+
+
+@dataclasses.dataclass(frozen=True)
+class _Problem:
+    """One discovery problem: the family, the model, the slot experiments (calibration
+    first), the slots and the flexible basis with its penalty and masks."""
+
+    fam: Any
+    model: GapModel
+    calibration: tuple[Experiment, ...]  # as given (the null is drawn from these)
+    validation: tuple[Experiment, ...]
+    exps: tuple[Experiment, ...]  # slot experiments, calibration first
+    n_cal: int
+    scale: float
+    n_samples: int
+    dyn: Any
+    slots: _Slots
+    basis: _Basis
+    pen: np.ndarray
+    labels: list[str]
+    masks: np.ndarray
+    lagged: tuple[str, ...]
+    opts: DiscoveryOptions
+
+    @property
+    def cal(self) -> tuple[Experiment, ...]:
+        return self.exps[: self.n_cal]
+
+    @property
+    def y_val(self) -> np.ndarray:
+        return np.concatenate([e.y for e in self.exps[self.n_cal :]])
+
+    def val_residual(self, pred) -> np.ndarray:
+        return np.concatenate(_residuals(self.exps, pred)[self.n_cal :])
+
+    def cal_residual(self, pred) -> np.ndarray:
+        return np.concatenate(_residuals(self.exps, pred)[: self.n_cal])
+
+    def interval(self, e0, e1, blen):
+        """`gap_change_interval` of the held-out residual `e0` → `e1`."""
+        o = self.opts
+        return gap_change_interval(e0, e1, self.y_val, length=blen, n_boot=o.n_boot, seed=o.seed)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Flexible:
+    """The flexible fits of every mask on the records: parameters, predictions, the
+    model's parameter count, the held-out figures per input, the residual without the
+    flexible term and its block length."""
+
+    thetas: np.ndarray
+    preds: np.ndarray
+    p_model: int
+    inputs: dict[str, dict[str, Any]]
+    e0: np.ndarray
+    blen: int
+
+    def pred(self, prob: _Problem, label: str) -> np.ndarray:
+        return self.preds[prob.labels.index(label)]
+
+
+@dataclasses.dataclass(frozen=True)
+class _Selection:
+    """The formula's selection: the screened members with their columns, the kept
+    members, the selection frequencies, the full-data elimination, the shape bounds
+    and the rows and matrices it ran on."""
+
+    members: list[Member]
+    X: list[np.ndarray]
+    final: list[int]
+    freq: dict[str, float]
+    full: Any
+    bounds: dict[str, tuple[float, float]]
+    rows: slice
+    Xs: np.ndarray
+    rs: np.ndarray
+    Bs: np.ndarray
+    flat0: np.ndarray
+    through_lag: bool
+    limits: dict[str, float]
+    n_eff: float  # a limit's lower bound (shape name -> median of its input)
+
+
+# ------------------------------------------------------------------------------ steps
+
+
+def _resolve(report_or_model, calibration, validation, family):
+    """`(model, calibration, validation, family instance)` from a report or a model."""
     from ._families import FAMILIES
 
-    t0 = time.perf_counter()
-    say = progress or (lambda msg: None)
     if calibration is None:
         rep = report_or_model
         if getattr(rep, "final_model", None) is None or not getattr(rep, "calibration", None):
@@ -674,91 +871,115 @@ def discover(
     fam = FAMILIES[family]() if isinstance(family, str) else family
     if fam.name not in SLOT_FAMILIES:
         raise ValueError(
-            f"discover: the {fam.name!r} family has no discovery slot yet; the drive family "
-            "has the slot 'additional force on the axis', the thermal family 'additional "
-            "heat flow into the bearing node' and 'additive term of the bearing sensor'."
+            f"discover: the {fam.name!r} family has no discovery slot yet; the families "
+            f"with slots are {', '.join(SLOT_FAMILIES)}."
         )
-    if not (isinstance(n_null, int) and n_null >= 0):
-        raise ValueError(f"discover: n_null must be an integer >= 0; got {n_null!r}.")
-    if not 0 < stability <= 1:
-        raise ValueError(f"discover: stability must lie in (0, 1]; got {stability!r}.")
-    rng = np.random.default_rng(seed)
-    cal = [_slot_experiment(e, fam.name) for e in calibration]
-    val = [_slot_experiment(e, fam.name) for e in validation]
-    exps = cal + val
-    n_cal = len(cal)
+    return model, calibration, validation, fam
+
+
+def _problem(model, calibration, validation, fam, opts: DiscoveryOptions) -> _Problem:
+    """The slot experiments, the family's slots and the flexible basis."""
+    cal = [_slot_experiment(e, fam.name, model) for e in calibration]
+    val = [_slot_experiment(e, fam.name, model) for e in validation]
     y_cal = np.concatenate([e.y for e in cal])
     scale = 1.0 / max(float(np.sqrt(np.mean(y_cal**2))), 1e-300)
     n_samples = int(sum(e.n for e in cal))
-
     dyn = _dynamics(unwrap(model))
-    slots = _DRIVE_SLOTS if fam.name == "drive" else _thermal_slots(cal, dyn)
-    basis = _Basis(cal, slots.inputs, n_basis, slots.keys)
+    slots = _family_slots(fam.name, cal, dyn)
+    basis = _Basis(cal, slots.inputs, opts.n_basis, slots.keys)
     pen = basis.penalty(n_samples, lam=1e-3, ridge=1e-7) * scale
     labels, masks = basis.masks(slots.nested)
-    lagged = tuple(lab for lab in slots.inputs if lab in slots.lagged)
+    return _Problem(
+        fam=fam,
+        model=model,
+        calibration=tuple(calibration),
+        validation=tuple(validation),
+        exps=tuple(cal + val),
+        n_cal=len(cal),
+        scale=scale,
+        n_samples=n_samples,
+        dyn=dyn,
+        slots=slots,
+        basis=basis,
+        pen=pen,
+        labels=labels,
+        masks=masks,
+        lagged=tuple(lab for lab in slots.inputs if lab in slots.lagged),
+        opts=opts,
+    )
 
-    # 1. the flexible term on the records
-    say("discovery: the flexible term, input by input")
-    thetas, preds, p_model, _ = _flexible_step(model, exps, n_cal, basis, scale, masks, pen, lagged)
-    red = _val_reductions(exps, n_cal, preds)
-    y_val = np.concatenate([e.y for e in val])
-    e0 = np.concatenate(_residuals(exps, preds[-1])[n_cal:])
+
+def _flexible(prob: _Problem) -> _Flexible:
+    """Step 1: the flexible term on the records, per input and with all, scored on the
+    held-out experiments."""
+    thetas, preds, p_model, _ = _flexible_step(
+        prob.model, prob.exps, prob.n_cal, prob.basis, prob.scale, prob.masks, prob.pen, prob.lagged
+    )
+    red = _val_reductions(prob.exps, prob.n_cal, preds)
+    e0 = prob.val_residual(preds[-1])
     blen = block_length(e0)
     inputs: dict[str, dict[str, Any]] = {}
-    for i, label in enumerate(labels):
-        e1 = np.concatenate(_residuals(exps, preds[i])[n_cal:])
-        _, _, sh, d_int, s_int = gap_change_interval(
-            e0, e1, y_val, length=blen, n_boot=n_boot, seed=seed
-        )
+    for i, label in enumerate(prob.labels):
+        _, _, sh, d_int, s_int = prob.interval(e0, prob.val_residual(preds[i]), blen)
         inputs[label] = {
             "reduction": float(red[i]),
             "reduction_interval": list(d_int),
             "shrink": float(sh),
             "shrink_interval": list(s_int),
         }
-    singles = labels[:-1]
-    best = max(singles, key=lambda lab: inputs[lab]["reduction"])
-    inner = slots.nested.get(best)
-    if inner in inputs:
-        # a term that contains a simpler one (`s·f(t)` contains `f(t)`) wins only when
-        # it removes more than the simpler one alone, by a held-out interval above zero
-        e_in = np.concatenate(_residuals(exps, preds[labels.index(inner)])[n_cal:])
-        e_best = np.concatenate(_residuals(exps, preds[labels.index(best)])[n_cal:])
-        _, _, _, d_nest, _ = gap_change_interval(
-            e_in, e_best, y_val, length=blen, n_boot=n_boot, seed=seed
-        )
+    return _Flexible(thetas, preds, p_model, inputs, e0, blen)
+
+
+def _choose_input(prob: _Problem, flex: _Flexible) -> str:
+    """The input whose term alone removes most of the held-out gap; a term that contains
+    a simpler one (`s·f(t)` contains `f(t)`) wins only when it removes more than the
+    simpler one alone, by a held-out interval above zero."""
+    singles = prob.labels[:-1]
+    best = max(singles, key=lambda lab: flex.inputs[lab]["reduction"])
+    inner = prob.slots.nested.get(best)
+    if inner in flex.inputs:
+        e_in = prob.val_residual(flex.pred(prob, inner))
+        e_best = prob.val_residual(flex.pred(prob, best))
+        _, _, _, d_nest, _ = prob.interval(e_in, e_best, flex.blen)
         if not d_nest[0] > 0:
             best = inner
-    ib = labels.index(best)
+    return best
 
-    # 2. the null: the same step on effect-free records
-    null_red: list[float] = []
-    if n_null:
-        say(f"discovery: the same step on {n_null} effect-free records")
-        # the drive's null: the nominal axis in the recorded loop; the thermal null: the
-        # model as calibrated (its lag included) on the records' own inputs
-        nom = GapModel(unwrap(model).nominal) if fam.name == "drive" else model
-        sets = fam.null_experiments(nom, list(calibration) + list(validation), rng, n_null)
-        for s in sets:
-            s = [_slot_experiment(e, fam.name) for e in s]
-            _, p_null, _, _ = _flexible_step(nom, s, n_cal, basis, scale, masks, pen, lagged)
-            null_red.append(float(np.max(_val_reductions(s, n_cal, p_null)[:-1])))
+
+def _null_reductions(prob: _Problem, rng: np.random.Generator) -> list[float]:
+    """Step 2: the same step on effect-free records: the best held-out reduction of each.
+    The drive's null: the nominal axis in the recorded loop; the others: the model as
+    calibrated (the thermal lag included) on the records' own inputs."""
+    n_null = prob.opts.n_null
+    if not n_null:
+        return []
+    fam = prob.fam
+    nom = GapModel(unwrap(prob.model).nominal) if fam.name == "drive" else prob.model
+    exps = list(prob.calibration) + list(prob.validation)
+    out = []
+    for s in fam.null_experiments(nom, exps, rng, n_null):
+        s = [_slot_experiment(e, fam.name, prob.model) for e in s]
+        _, p_null, _, _ = _flexible_step(
+            nom, s, prob.n_cal, prob.basis, prob.scale, prob.masks, prob.pen, prob.lagged
+        )
+        out.append(float(np.max(_val_reductions(s, prob.n_cal, p_null)[:-1])))
+    return out
+
+
+def _fire(prob: _Problem, flex: _Flexible, best: str, null_red: list[float]) -> Discovered:
+    """Whether the flexible term beat the null; the report's first part (and why not)."""
+    o = prob.opts
     thr = float(np.quantile(null_red, 0.95)) if null_red else 0.0
-    fb = inputs[best]
-    fired = fb["reduction"] > thr and fb["reduction_interval"][0] > 0 and fb["shrink"] >= min_shrink
-    flexible = {
-        "input": best,
-        **fb,
-        "null_threshold": thr,
-        "null_reductions": null_red,
-    }
+    fb = flex.inputs[best]
+    fired = (
+        fb["reduction"] > thr and fb["reduction_interval"][0] > 0 and fb["shrink"] >= o.min_shrink
+    )
     out = Discovered(
-        slot=slots.slot_of[best],
+        slot=prob.slots.slot_of[best],
         fired=bool(fired),
         input=best if fired else None,
-        inputs=inputs,
-        flexible=flexible,
+        inputs=flex.inputs,
+        flexible={"input": best, **fb, "null_threshold": thr, "null_reductions": null_red},
         evidence="linear-Gaussian evidence, Zellner g-prior with g = N_eff (unit information)",
     )
     if not fired:
@@ -770,59 +991,72 @@ def discover(
             )
         if fb["reduction_interval"][0] <= 0:
             why.append("its bootstrap interval includes zero")
-        if fb["shrink"] < min_shrink:
-            why.append(f"its shrink {fb['shrink']:.3g} is below {min_shrink:g}")
+        if fb["shrink"] < o.min_shrink:
+            why.append(f"its shrink {fb['shrink']:.3g} is below {o.min_shrink:g}")
         out.message = (
             "nothing to discover: the flexible term's gain is not real (" + "; ".join(why) + ")"
         )
-        out.seconds = time.perf_counter() - t0
-        return out
+    return out
 
-    # 3. the formula
-    say("discovery: the formula (evidence elimination, stability selection)")
-    cal_d = {k: np.concatenate([np.asarray(e.arrays[k], float) for e in cal]) for k in slots.keys}
-    slot = slots.slot_of[best]
-    members = slots.dictionaries[slot](cal_d)
-    # a heat flow's terms pass through the model's lag (at its calibrated time constant
-    # for the selection; with it free in the recalibration)
-    through_lag = slot == SLOT_HEAT and dyn is not None
-    # each shape stays within a factor 3 of its grid (a shape that runs away turns its
-    # term into another kind: a Stribeck speed at infinity is a sign law)
+
+def _slot_members(prob: _Problem, best: str, cal_d: dict[str, np.ndarray]) -> list[Member]:
+    """The dictionary of the winning input's slot, restricted to what may carry it."""
+    slot = prob.slots.slot_of[best]
+    members = prob.slots.dictionaries[slot](cal_d)
+    key = prob.slots.inputs[best]
+    if prob.fam.name == "thermal":
+        # the formula is made of the winning input's variables (the chassis temperature,
+        # an input of the model, may join them): the gap lives there, and the thermal
+        # inputs drift together over hours, so a term in another of them would stand in
+        # for it
+        src = {"s*t": ("s", "t")}.get(key, (key,))
+        members = [m for m in members if set(m.kind.inputs) <= set(src) | {"T_chassis"}]
+    return members
+
+
+def _shape_bounds(members: Sequence[Member]) -> dict[str, tuple[float, float]]:
+    """Each kind's grid range: its shape stays within a factor 3 of it in the
+    recalibration (a shape that runs away turns its term into another kind: a Stribeck
+    speed at infinity is a sign law)."""
     bounds: dict[str, tuple[float, float]] = {}
     for m in members:
         if m.shape is not None:
             lo_, hi_ = bounds.get(m.kind.name, (np.inf, -np.inf))
             bounds[m.kind.name] = (min(lo_, m.shape), max(hi_, m.shape))
-    if fam.name == "thermal":
-        # the formula is made of the winning input's variables (the chassis temperature,
-        # an input of the model, may join them): the gap lives there, and the thermal
-        # inputs drift together over hours, so a term in another of them would stand in
-        # for it
-        src = {"s*t": ("s", "t")}.get(slots.inputs[best], (slots.inputs[best],))
-        members = [m for m in members if set(m.kind.inputs) <= set(src) | {"T_chassis"}]
-    if fam.name == "drive" and best != "force":
-        # the recorded force is the target: a term in it enters the formula only when
-        # the flexible term says the gap lives there (else it stands in for any term
-        # correlated with the force, the noise included)
-        members = [m for m in members if "u" not in m.kind.inputs]
-    flat0 = thetas[-1][:p_model]
+    return bounds
+
+
+def _select(prob: _Problem, flex: _Flexible, best: str, rng) -> _Selection:
+    """Step 3: the dictionary screened, then backward elimination on the evidence and
+    stability selection on block-bootstrap resamples; one member per kept kind."""
+    o = prob.opts
+    cal = prob.cal
+    cal_d = {
+        k: np.concatenate([np.asarray(e.arrays[k], float) for e in cal]) for k in prob.slots.keys
+    }
+    members = _slot_members(prob, best, cal_d)
+    bounds = _shape_bounds(members)
+    # a heat flow's terms pass through the model's lag (at its calibrated time constant
+    # for the selection; with it free in the recalibration)
+    through_lag = prob.slots.slot_of[best] == SLOT_HEAT and prob.dyn is not None
+    flat0 = flex.thetas[-1][: flex.p_model]
+    dyn = None
     if through_lag:
         # the lag at the time constant of the model recalibrated beside the flexible terms
-        _, unravel0, static0 = _split(model)
+        _, unravel0, static0 = _split(prob.model)
         dyn = _dynamics(unwrap(eqx.combine(unravel0(jnp.asarray(flat0)), static0)))
-    X = [_member_columns(m, cal, dyn if through_lag else None) for m in members]
-    r_cal = np.concatenate(_residuals(exps, preds[-1])[:n_cal])
-    B = _base_jacobian(model, flat0, cal)
+    X = [_member_columns(m, cal, dyn) for m in members]
+    r_cal = prob.cal_residual(flex.preds[-1])
+    B = _base_jacobian(prob.model, flat0, cal)
     chosen = _screen(members, X, B, r_cal, keep=2)
     members = [members[i] for i in chosen]
     X = [X[i] for i in chosen]
-    cols, groups, k0 = [], [], 0
+    groups, k0 = [], 0
     for x in X:
-        cols.append(x)
         groups.append(list(range(k0, k0 + x.shape[1])))
         k0 += x.shape[1]
-    Xm = np.concatenate(cols, axis=1)
-    r_flex = np.concatenate(_residuals(exps, preds[labels.index("all")])[:n_cal])
+    Xm = np.concatenate(X, axis=1)
+    r_flex = prob.cal_residual(flex.pred(prob, "all"))
     # the selection on every `stride`-th sample (at most 4000): the terms are smooth and
     # the residual correlated over many samples, so this loses no evidence (N_eff is
     # measured on the same rows)
@@ -830,11 +1064,23 @@ def discover(
     rows = slice(None, None, stride)
     Xs, rs, Bs, r_fs = Xm[rows], r_cal[rows], B[rows], r_flex[rows]
     n_eff = effective_samples(r_fs)
-    full = backward_elimination(Xs, rs, groups, base=Bs, n_eff=n_eff, margin=min_evidence)
-    idx = block_bootstrap_indices(rs.size, block_length(r_fs), n_stability, rng)
+    full = backward_elimination(Xs, rs, groups, base=Bs, n_eff=n_eff, margin=o.min_evidence)
+    idx = block_bootstrap_indices(rs.size, block_length(r_fs), o.n_stability, rng)
     _, supports = stability_selection(
-        Xs, rs, groups, resamples=idx, base=Bs, n_eff=n_eff, margin=min_evidence
+        Xs, rs, groups, resamples=idx, base=Bs, n_eff=n_eff, margin=o.min_evidence
     )
+    freq, final = _kept(members, supports, full, o.stability)
+    # a limit (`L`, of the model's output) lies above the median of its input
+    limits = {"L": float(np.median(np.abs(cal_d["yhat"])))} if "yhat" in cal_d else {}
+    return _Selection(
+        members, X, final, freq, full, bounds, rows, Xs, rs, Bs, flat0, through_lag, limits, n_eff
+    )
+
+
+def _kept(members, supports, full, stability) -> tuple[dict[str, float], list[int]]:
+    """Selection frequency of every kind, and one member per kind kept in at least
+    `stability` of the resamples (the shape is calibrated afterwards, so a second grid
+    member of the kind would only split the same term in two)."""
     kinds = sorted({m.kind.name for m in members})
     freq = {
         k: float(np.mean([any(members[j].kind.name == k for j in s) for s in supports]))
@@ -844,76 +1090,78 @@ def discover(
     for s in supports:
         member_freq[list(s)] += 1
     member_freq /= max(len(supports), 1)
-    kept_kinds = [k for k in kinds if freq[k] >= stability]
-    final_members: list[int] = []
-    for k in kept_kinds:
-        # one member per kind: the shape is calibrated afterwards, so a second grid
-        # member of the kind would only split the same term in two
+    final: list[int] = []
+    for k in (k for k in kinds if freq[k] >= stability):
         in_full = [j for j in full.support if members[j].kind.name == k]
-        if in_full:
-            final_members.append(max(in_full, key=lambda j: member_freq[j]))
-        else:
-            cand = [j for j in range(len(members)) if members[j].kind.name == k]
-            final_members.append(max(cand, key=lambda j: member_freq[j]))
-    final_members = sorted(final_members)
-    out.frequencies = freq
+        cand = in_full or [j for j in range(len(members)) if members[j].kind.name == k]
+        final.append(max(cand, key=lambda j: member_freq[j]))
+    return freq, sorted(final)
 
-    # flexible term's shape over its input (for the figure)
-    out.shape = _shape(
-        exps, n_cal, basis, thetas[ib], p_model, best, preds[-1], slots, pred_flex=preds[ib]
-    )
-    if not final_members:
-        for k in ("_keep", "_v", "_step"):
-            out.shape.pop(k)
-        out.message = (
-            "no formula found: no term of the dictionary is kept in "
-            f"{stability:.0%} of the resamples; the flexible term's shape over {best} is "
-            "the answer"
-        )
-        out.seconds = time.perf_counter() - t0
-        return out
 
-    fm = [members[j] for j in final_members]
+def _start(sel: _Selection) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """The recalibration's start: coefficients, log shapes and their bounds."""
+    fm = [sel.members[j] for j in sel.final]
     c0 = np.concatenate(
-        [full.coefficients.get(j, np.zeros(members[j].kind.k)) for j in final_members]
+        [sel.full.coefficients.get(j, np.zeros(sel.members[j].kind.k)) for j in sel.final]
     )
-    if not np.all(np.isfinite(c0)) or not all(j in full.support for j in final_members):
+    if not np.all(np.isfinite(c0)) or not all(j in sel.full.support for j in sel.final):
         # a kept kind the full-data elimination dropped: start from least squares of the
         # kept terms with the model's Jacobian beside them
-        A = np.concatenate([Bs] + [X[j][rows] for j in final_members], 1)
-        c0 = np.linalg.lstsq(A, rs, rcond=None)[0][Bs.shape[1] :]
+        A = np.concatenate([sel.Bs] + [sel.X[j][sel.rows] for j in sel.final], 1)
+        c0 = np.linalg.lstsq(A, sel.rs, rcond=None)[0][sel.Bs.shape[1] :]
     logs0 = np.log([m.shape if m.shape is not None else 1.0 for m in fm])
-    say("discovery: recalibrating the formula")
-    med_u = float(np.median(np.abs(cal_d["u"]))) if "u" in cal_d else 0.0
-    lo = np.array(
-        [np.log(bounds[m.kind.name][0] / 3) if m.shape is not None else -np.inf for m in fm]
-    )
-    hi = np.array(
-        [np.log(bounds[m.kind.name][1] * 3) if m.shape is not None else np.inf for m in fm]
-    )
-    if med_u > 0:
-        lo = np.where([m.kind.shape == "F" for m in fm], np.log(med_u), lo)  # a limit, not u
+    b = sel.bounds
+    lo = np.array([np.log(b[m.kind.name][0] / 3) if m.shape is not None else -np.inf for m in fm])
+    hi = np.array([np.log(b[m.kind.name][1] * 3) if m.shape is not None else np.inf for m in fm])
+    for name, med in sel.limits.items():
+        # a limit lies above the median of its input (a limit, not the input itself)
+        if med > 0:
+            lo = np.where([m.kind.shape == name for m in fm], np.log(med), lo)
     logs0 = np.clip(logs0, lo + 1e-9, hi - 1e-9)
-    fit = _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, (lo, hi), through_lag)
-    theta, pred_f, jtj, r_w = fit
-    p = p_model
-    k = int(sum(m.kind.k for m in fm))
-    e_f = np.concatenate(_residuals(exps, pred_f)[n_cal:])
-    _, _, sh_f, d_f, s_f = gap_change_interval(
-        e0, e_f, y_val, length=blen, n_boot=n_boot, seed=seed
-    )
-    red_f = nrmse(e0, y_val) - nrmse(e_f, y_val)
-    share = red_f / fb["reduction"] if fb["reduction"] > 0 else float("nan")
+    return c0, logs0, (lo, hi)
 
-    # intervals: Gauss–Newton covariance, inflated by the integrated autocorrelation time
-    r_cal_f = np.concatenate(_residuals(exps, pred_f)[:n_cal])
-    n_par = theta.size
+
+def _recalibrate(prob: _Problem, flex: _Flexible, sel: _Selection, out: Discovered) -> None:
+    """Step 4: the kept terms recalibrated with their shapes free, jointly with the
+    model; held-out figures, intervals, the formula and the verdict into `out`."""
+    o = prob.opts
+    fm = [sel.members[j] for j in sel.final]
+    c0, logs0, bounds = _start(sel)
+    static_slot = prob.slots.slot_of[out.flexible["input"]] == SLOT_STATIC
+    mode = "lag" if sel.through_lag else ("static" if static_slot else "add")
+    theta, pred_f, jtj, r_w = _formula_fit(
+        prob.model, sel.flat0, prob, fm, (c0, logs0), bounds, mode
+    )
+    e_f = prob.val_residual(pred_f)
+    _, _, sh_f, d_f, s_f = prob.interval(flex.e0, e_f, flex.blen)
+    red_f = nrmse(flex.e0, prob.y_val) - nrmse(e_f, prob.y_val)
+    fb = out.flexible
+    share = red_f / fb["reduction"] if fb["reduction"] > 0 else float("nan")
+    out.terms, out.expression = _terms(prob, flex, fm, (theta, jtj, r_w, pred_f), sel.freq)
+    out.formula = str(out.expression)
+    out.shrink, out.shrink_interval = float(sh_f), (float(s_f[0]), float(s_f[1]))
+    out.reduction, out.reduction_interval = float(red_f), (float(d_f[0]), float(d_f[1]))
+    out.share = float(share)
+    out.nearest_effect, out.named_instead = nearest_named(
+        [m.kind.name for m in fm], prob.slots.named
+    )
+    out.found = bool(d_f[0] > 0 and red_f > fb["null_threshold"] and share >= o.min_share)
+    out.shape["formula"] = _formula_on(prob.exps, prob.n_cal, pred_f, flex.preds[-1], out.shape)
+    out.message = _formula_message(out, o.min_share)
+
+
+def _terms(prob, flex, fm, fit, freq) -> tuple[list[dict[str, Any]], Any]:
+    """Per kept term its coefficients with intervals (Gauss–Newton covariance inflated
+    by the integrated autocorrelation time), its shape, frequency; and the SymPy sum."""
+    theta, jtj, r_w, pred_f = fit
+    p = flex.p_model
+    k = int(sum(m.kind.k for m in fm))
     shaped = np.array([m.shape is not None for m in fm])
     free = np.concatenate([np.ones(p + k, bool), shaped])
-    cov = _covariance(jtj, r_w, free, n_samples, r_cal_f)
+    cov = _covariance(jtj, r_w, free, prob.n_samples, prob.cal_residual(pred_f))
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     terms, i = [], p
-    sym_x = _symbols(slots.symbols)
+    sym_x = _symbols(prob.slots.symbols)
     expr = 0
     for j, m in enumerate(fm):
         c = theta[i : i + m.kind.k]
@@ -930,8 +1178,7 @@ def discover(
         }
         shape_val = None
         if m.shape is not None:
-            ls = theta[p + k + j]
-            lsd = sd[p + k + j]
+            ls, lsd = theta[p + k + j], sd[p + k + j]
             shape_val = float(np.exp(ls))
             term["shape"] = {
                 "name": m.kind.shape,
@@ -941,35 +1188,224 @@ def discover(
             }
         terms.append(term)
         expr = expr + m.kind.sympy([_num4(x) for x in c], shape_val, sym_x)
-    del n_par
-    out.terms = terms
-    out.expression = expr
-    out.formula = str(expr)
-    out.shrink, out.shrink_interval = float(sh_f), (float(s_f[0]), float(s_f[1]))
-    out.reduction, out.reduction_interval = float(red_f), (float(d_f[0]), float(d_f[1]))
-    out.share = float(share)
-    out.nearest_effect, out.named_instead = nearest_named([m.kind.name for m in fm], slots.named)
-    ok = d_f[0] > 0 and red_f > thr and share >= min_share
-    out.found = bool(ok)
-    out.shape["formula"] = _formula_on(exps, n_cal, pred_f, preds[-1], out.shape)
-    if not ok:
-        out.message = (
-            f"no formula found: the best formula {out.formula} removes {share:.0%} of what the "
-            f"flexible term removes (needs {min_share:.0%}, an interval excluding zero and "
+    return terms, expr
+
+
+def _formula_message(out: Discovered, min_share: float) -> str:
+    best = out.flexible["input"]
+    if not out.found:
+        return (
+            f"no formula found: the best formula {out.formula} removes {out.share:.0%} of what "
+            f"the flexible term removes (needs {min_share:.0%}, an interval excluding zero and "
             f"more than the null); the flexible term's shape over {best} is the answer"
         )
-    elif out.named_instead:
-        out.message = (
+    if out.named_instead:
+        return (
             f"the formula's terms are those of the library effect {out.nearest_effect}: "
             f"report {out.nearest_effect} (formula {out.formula})"
         )
-    else:
-        out.message = (
-            f"formula found: {out.formula} (removes {out.shrink:.0%} of the held-out gap, "
-            f"{share:.0%} of the flexible term's reduction)"
+    return (
+        f"formula found: {out.formula} (removes {out.shrink:.0%} of the held-out gap, "
+        f"{out.share:.0%} of the flexible term's reduction)"
+    )
+
+
+# ------------------------------------------------------------------------------ entry
+
+_OPTION_NAMES = frozenset(f.name for f in dataclasses.fields(DiscoveryOptions))
+
+
+def discover(
+    report_or_model: Any,
+    calibration: Sequence[Experiment] | None = None,
+    validation: Sequence[Experiment] | None = None,
+    *,
+    family: Any = "drive",
+    options: DiscoveryOptions | None = None,
+    progress: Any = None,
+    **settings: Any,
+) -> Discovered:
+    """Discover an effect outside the library: a flexible term in the family's slot,
+    scored against the null, then its formula from a typed dictionary (module doc).
+
+    **Arguments:**
+
+    - `report_or_model`: a [`DiagnosisReport`][jaxvs.diagnosis.DiagnosisReport] of
+        `jaxvs.diagnose` (its final model and experiments are used), or a calibrated
+        `GapModel`, with `calibration` and `validation` its prepared experiments (held
+        out: the validation experiments are never fitted).
+    - `family`: the family name (`"drive"`, `"thermal"`, `"tmf"`) or instance; taken
+        from the report.
+    - `options`: a [`DiscoveryOptions`][jaxvs.diagnosis.DiscoveryOptions]; its fields
+        may also be given as keywords (`n_null=9`, `seed=1`, ...), which replace those
+        of `options`.
+    - `progress`: optional `callable(str)` told what runs.
+
+    **Returns:** a [`Discovered`][jaxvs.diagnosis.Discovered].
+    """
+    unknown = set(settings) - _OPTION_NAMES
+    if unknown:
+        raise TypeError(
+            f"discover: unknown setting(s) {', '.join(sorted(unknown))}; the settings are "
+            f"the fields of DiscoveryOptions: {', '.join(sorted(_OPTION_NAMES))}."
         )
+    opts = dataclasses.replace(options or DiscoveryOptions(), **settings)
+    t0 = time.perf_counter()
+    say = progress or (lambda msg: None)
+    model, calibration, validation, fam = _resolve(report_or_model, calibration, validation, family)
+    rng = np.random.default_rng(opts.seed)
+    prob = _problem(model, calibration, validation, fam, opts)
+
+    say("discovery: the flexible term, input by input")
+    flex = _flexible(prob)
+    best = _choose_input(prob, flex)
+    if opts.n_null:
+        say(f"discovery: the same step on {opts.n_null} effect-free records")
+    out = _fire(prob, flex, best, _null_reductions(prob, rng))
+    if out.fired:
+        say("discovery: the formula (evidence elimination, stability selection)")
+        sel = _select(prob, flex, best, rng)
+        out.frequencies = sel.freq
+        out.shape = _shape(
+            prob.exps,
+            prob.n_cal,
+            prob.basis,
+            flex.thetas[prob.labels.index(best)],
+            flex.p_model,
+            best,
+            flex.preds[-1],
+            prob.slots,
+            pred_flex=flex.pred(prob, best),
+        )
+        if not sel.final:
+            for k in ("_keep", "_per", "_v", "_step"):
+                out.shape.pop(k)
+            out.message = (
+                "no formula found: no term of the dictionary is kept in "
+                f"{opts.stability:.0%} of the resamples; the flexible term's shape over "
+                f"{best} is the answer"
+            )
+        else:
+            say("discovery: recalibrating the formula")
+            _recalibrate(prob, flex, sel, out)
+        if opts.design and fam.name in DESIGN_FAMILIES and not out.named_instead:
+            say("discovery: a rival formula, and the experiment that tells them apart")
+            out.rival, out.next_experiment = _design_next(prob, sel)
     out.seconds = time.perf_counter() - t0
     return out
+
+
+# ------------------------------------------------------------------------------ design
+
+
+def _support_fit(sel: _Selection, support, rows_x=None):
+    """Least squares of the record's residual on the base and the support's columns:
+    `(coefficients, ssr)`."""
+    A = np.concatenate([sel.Bs] + [sel.X[j][sel.rows] for j in support], 1)
+    coef, *_ = np.linalg.lstsq(A, sel.rs, rcond=None)
+    r = sel.rs - A @ coef
+    return coef, float(r @ r)
+
+
+def _rival(sel: _Selection, support) -> tuple[list[int], float] | None:
+    """The best rival of `support` (one term swapped for a term of a kind not in it) and
+    the log evidence of `support` over it."""
+    n_eff, p_b = sel.n_eff, sel.Bs.shape[1]
+    _, ssr0 = _support_fit(sel, [])
+
+    def ev(sup):
+        k = sum(sel.members[j].kind.k for j in sup)
+        return log_evidence(_support_fit(sel, sup)[1], ssr0, n_eff - p_b, k, n_eff)
+
+    kinds = {sel.members[j].kind.name for j in support}
+    best = None
+    for i in support:
+        for j, m in enumerate(sel.members):
+            if m.kind.name in kinds:
+                continue
+            sup = sorted([x for x in support if x != i] + [j])
+            e = ev(sup)
+            if best is None or e > best[1]:
+                best = (sup, e)
+    if best is None:
+        return None
+    return best[0], ev(support) - best[1]
+
+
+def _candidate_experiment(prob: _Problem, t, sig) -> Experiment:
+    """A slot experiment of the family on the candidate signal `sig` (relative to the
+    records' start position), the target zero."""
+    tpl = prob.calibration[0]
+    n = t.size
+    if prob.fam.name == "drive":
+        q = float(np.asarray(tpl.arrays["q"])[0]) + sig
+        v = np.gradient(q, t)
+        arrays = {"q": q, "v": v, "a": np.gradient(v, t), "y": np.zeros(n)}
+    else:
+        pos = float(np.asarray(tpl.arrays["pos_y"])[0])
+        arrays = {
+            "x_e": sig,
+            "pos_y": np.full(n, pos),
+            "f": np.zeros(n),
+            "f0": np.zeros(n),
+            "y": np.zeros(n),
+        }
+    e = dataclasses.replace(tpl, t=t, arrays=arrays, ops={}, masks={})
+    return _slot_experiment(e, prob.fam.name, prob.model)
+
+
+def _design_next(
+    prob: _Problem, sel: _Selection
+) -> tuple[dict[str, Any] | None, NextExperiment | None]:
+    """When a rival formula is within the evidence ratio `design_ratio` of the kept one,
+    the candidate excitation within the records' limits on which the two (each fitted
+    to the records with the model's Jacobian beside it) disagree most. The kept support
+    is the formula's, or where stability selection kept none, the full-data
+    elimination's (one member per kind)."""
+    support = list(sel.final)
+    if not support:
+        by_kind: dict[str, int] = {}
+        for j in sel.full.support:
+            by_kind.setdefault(sel.members[j].kind.name, j)
+        support = sorted(by_kind.values())
+    found = _rival(sel, support) if support else None
+    if found is None:
+        return None, None
+    rival, log_ratio = found
+
+    def label(sup):
+        return " + ".join(sel.members[j].label for j in sup)
+
+    info = {"formula": label(support), "rival": label(rival), "log_evidence_ratio": log_ratio}
+    if abs(log_ratio) >= math.log(prob.opts.design_ratio):
+        return info, None
+    fits = [(sup, _support_fit(sel, sup)[0]) for sup in (support, rival)]
+
+    def outputs(B, cols):
+        return [np.concatenate([B] + [cols[j] for j in sup], 1) @ coef for sup, coef in fits]
+
+    rec = outputs(sel.Bs, {j: sel.X[j][sel.rows] for j in range(len(sel.members))})
+    jac = _jacobian_fn(prob.model)
+    lim = limits_from(prob.fam.name, prob.cal)
+
+    def predict_pair(t, sig):
+        e = _candidate_experiment(prob, t, sig)
+        B = _base_jacobian(prob.model, sel.flat0, [e], jac)
+        used = set(support) | set(rival)
+        cols = {j: sel.members[j].evaluate(e.arrays) for j in used}
+        pair = outputs(B, cols)
+        if lim.force is not None and np.max(np.abs(e.arrays["yhat"] + pair[0])) > lim.force:
+            return None  # beyond the largest recorded force
+        return pair
+
+    return info, design(
+        prob.fam.name,
+        lim,
+        predict_pair,
+        rec[0] - rec[1],
+        (label(support), label(rival)),
+        log_ratio,
+    )
 
 
 def _num4(x) -> float:
@@ -995,36 +1431,43 @@ def _member_columns(m: Member, cal: Sequence[Experiment], dyn) -> np.ndarray:
     return np.concatenate(cols)
 
 
-def _base_jacobian(model, flat, cal) -> np.ndarray:
-    """Jacobian of the model's prediction on the calibration samples with respect to its
-    free parameters (the columns the selection profiles out)."""
+def _jacobian_fn(model):
+    """`jac(flat, arrays)`: the Jacobian of the model's prediction with respect to its
+    free parameters (compiled once per array shape)."""
     _, unravel, static = _split(model)
 
     def pred(theta, d):
         return unwrap(eqx.combine(unravel(theta), static))(d)
 
-    jac = eqx.filter_jit(jax.jacfwd(pred))
+    return eqx.filter_jit(jax.jacfwd(pred))
+
+
+def _base_jacobian(model, flat, cal, jac=None) -> np.ndarray:
+    """Jacobian of the model's prediction on the calibration samples with respect to its
+    free parameters (the columns the selection profiles out)."""
+    jac = jac or _jacobian_fn(model)
     return np.concatenate([np.asarray(jac(jnp.asarray(flat), e.jax_arrays())) for e in cal])
 
 
-def _formula_fit(model, flat0, exps, n_cal, scale, fm, c0, logs0, bounds, through_lag=False):
-    lo, hi = bounds
+def _formula_fit(model, flat0, prob, fm, start, bounds, mode="add"):
+    """The formula's members `fm` and the model calibrated jointly from `start`
+    (coefficients, log shapes) within the log-shape `bounds`; returns θ, the prediction,
+    the Jacobian of the weighted residual and the weighted residual."""
     _, unravel, static = _split(model)
+    exps = prob.exps
     st = _stack(exps, sorted(exps[0].arrays))
     w = np.zeros((len(exps), st["y"].shape[1]))
-    for i, e in enumerate(exps[:n_cal]):
-        w[i, : e.n] = scale
-    fns = tuple((m.kind.columns, m.kind.k, m.shape is not None, through_lag) for m in fm)
+    for i, e in enumerate(exps[: prob.n_cal]):
+        w[i, : e.n] = prob.scale
+    fns = tuple((m.kind.columns, m.kind.k, m.shape is not None, mode) for m in fm)
     theta, pred, jtj, r_w = _fit_formula(
         unravel(jnp.asarray(flat0)),
         static,
         {k: jnp.asarray(v) for k, v in st.items()},
         jnp.asarray(st["y"]),
         jnp.asarray(w),
-        jnp.asarray(c0, float),
-        jnp.asarray(logs0, float),
-        jnp.asarray(lo, float),
-        jnp.asarray(hi, float),
+        tuple(jnp.asarray(x, float) for x in start),
+        tuple(jnp.asarray(x, float) for x in bounds),
         fns,
         100,
     )
@@ -1063,26 +1506,21 @@ def _shape(
     for i, e in enumerate(exps[:n_cal]):
         d = {k: jnp.asarray(e.arrays[k])[None] for k in basis.keys}
         phi = np.asarray(_basis_values(basis, d))[0]
-        xs.append(np.asarray(e.arrays["t" if key in ("v*t", "s*t") else key]))
-        if pred_flex is None or key in ("v*t", "s*t"):
+        xs.append(np.asarray(e.arrays[key.split("*")[-1]]))
+        if pred_flex is None or "*" in key:
             fl.append(phi[:, sl] @ c[sl])
         else:
             fl.append(pred_flex[i, : e.n] - pred0[i, : e.n])
         pr.append(e.y - pred0[i, : e.n])
-        vs.append(np.asarray(e.arrays["s" if key == "s*t" else slots.keys[0]]))
+        vs.append(np.asarray(e.arrays[key.split("*")[0]]))
     x, f, r, v = (np.concatenate(z) for z in (xs, fl, pr, vs))
-    per_v = key in ("v*t", "s*t")
+    per_v = "*" in key
     keep = np.abs(v) > 0.3 * np.max(np.abs(v)) if per_v else np.ones(x.size, bool)
     if per_v:
         f, r = f / np.where(keep, v, 1.0), r / np.where(keep, v, 1.0)
     x, f, r = x[keep], f[keep], r[keep]
     step = max(1, x.size // 3000)
-    if key == "s*t":
-        ylabel = "heat flow per unit speed f(t) [K/rpm]"
-    elif per_v:
-        ylabel = "viscous coefficient f(t) [N·s/m]"
-    else:
-        ylabel = slots.ylabel
+    ylabel = slots.product_ylabels.get(key, slots.ylabel)
     return {
         "label": slots.axis_labels[key],
         "ylabel": ylabel,
@@ -1091,6 +1529,7 @@ def _shape(
         "flexible": f[::step],
         "partial": r[::step],
         "_keep": keep,
+        "_per": per_v,
         "_v": v,
         "_step": step,
     }
@@ -1101,6 +1540,6 @@ def _formula_on(exps, n_cal, pred_f, pred0, shape) -> np.ndarray:
     the fit without it), divided by `v` where the figure shows `f(t)`."""
     d = np.concatenate([pred_f[i, : e.n] - pred0[i, : e.n] for i, e in enumerate(exps[:n_cal])])
     keep, v = shape.pop("_keep"), shape.pop("_v")
-    if shape["ylabel"].startswith(("viscous", "heat flow per")):
+    if shape.pop("_per"):
         d = d / np.where(keep, v, 1.0)
     return d[keep][:: shape.pop("_step")]

@@ -1160,8 +1160,7 @@ class DriveFamily(AbstractFamily):
             mass = self.options.get("mass") or 0.0
             if isinstance(mass, bool) or not isinstance(mass, int | float) or not mass >= 0:
                 raise ValueError(
-                    f"diagnose(drive): the mass option must be a moving mass >= 0 kg; got "
-                    f"{mass!r}."
+                    f"diagnose(drive): the mass option must be a moving mass >= 0 kg; got {mass!r}."
                 )
             mass = float(mass)
             (fv, off), *_ = np.linalg.lstsq(np.stack([v, one], -1), y - mass * a, rcond=None)

@@ -125,9 +125,7 @@ def white_noise_floor(
     return s0, math.sqrt(s0 * fs / 2.0)
 
 
-def noise_like(
-    residual: np.ndarray, fs: float, rng: np.random.Generator, count: int
-) -> np.ndarray:
+def noise_like(residual: np.ndarray, fs: float, rng: np.random.Generator, count: int) -> np.ndarray:
     """`count` Gaussian draws of the length of `residual` with its power spectrum.
 
     The spectrum is the residual's Welch estimate with the **median** over segments
