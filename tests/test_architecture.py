@@ -265,10 +265,8 @@ LONG_SIGNATURES = {
     # Public entry points that mirror a command line: one keyword per option of the command.
     "jaxvs.diagnosis._diagnose:diagnose",  # jaxvs diagnose
     "jaxvs.studies.design._design:design",  # jaxvs design
-    "jaxvs.diagnosis._discover:discover",  # the discovery options of jaxvs diagnose
     "jaxvs.calibration._calibrate:calibrate",  # shaped like optimistix.least_squares
     # Pending: diagnosis internals, rebuilt in their own change.
-    "jaxvs.diagnosis._discover:_fit_formula",
 }
 
 
@@ -310,7 +308,6 @@ MAX_DIAGNOSIS_LINES = 150
 LONG_FUNCTIONS = {
     # being split
     "jaxvs.diagnosis._diagnose:diagnose",
-    "jaxvs.diagnosis._discover:discover",
     "jaxvs.diagnosis._report:DiagnosisReport.to_markdown",
 }
 

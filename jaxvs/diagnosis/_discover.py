@@ -84,9 +84,7 @@ from ..calibration import (
     backward_elimination,
     free_spec,
     jacobian_normal_equations,
-    lm_init,
-    lm_running,
-    lm_step,
+    lm_solve,
     log_evidence,
     stability_selection,
     unwrap,
@@ -559,12 +557,7 @@ def _fit_flexible(params, static, inputs, y, wfit, phi, pen, masks, max_steps):
     theta0 = jnp.concatenate([flat, jnp.zeros(phi.shape[-1], flat.dtype)])
 
     def one(mask):
-        st = lm_init(evaluate, theta0, mask, 1e-10)
-        st = jax.lax.while_loop(
-            lambda s: lm_running(s, max_steps),
-            lambda s: lm_step(evaluate, None, s, mask, 1e-10),
-            st,
-        )
+        st = lm_solve(evaluate, theta0, mask, max_steps=max_steps, rtol=1e-10)
         return st.theta, predict(st.theta, mask), st.cost
 
     return jax.vmap(one)(masks)
@@ -690,12 +683,7 @@ def _fit_formula(params, static, inputs, y, wfit, start, bounds, fns, max_steps)
 
     evaluate = jacobian_normal_equations(resid)
     theta0 = jnp.concatenate([flat, coefs0, logs0])
-    st = lm_init(evaluate, theta0, None, 1e-10)
-    st = jax.lax.while_loop(
-        lambda s: lm_running(s, max_steps),
-        lambda s: lm_step(evaluate, feasible, s, None, 1e-10),
-        st,
-    )
+    st = lm_solve(evaluate, theta0, None, max_steps=max_steps, rtol=1e-10, feasible=feasible)
     return st.theta, predict(st.theta), st.jtj, resid(st.theta, None)
 
 

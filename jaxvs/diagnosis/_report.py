@@ -273,6 +273,8 @@ class DiagnosisReport:
         (out / "report.json").write_text(json.dumps(self.to_json(), indent=2) + "\n")
         (out / "report.md").write_text(self.to_markdown())
         (out / "report.html").write_text(self.to_html(out))
+        if self.discovered is not None:  # the reference signal of the proposed experiment
+            self.discovered.save_next_experiment(out / "next_experiment.csv")
         return out
 
 
@@ -419,4 +421,20 @@ def _discovered_markdown(d: dict[str, Any] | None) -> list[str]:
                 f"Held-out shrink {d['shrink']:.2f}; share of what the flexible term removes "
                 f"{d.get('share') or 0:.2f}; nearest named effect: {d.get('nearest_effect')}."
             )
+    rival, nxt = d.get("rival"), d.get("next_experiment")
+    if rival:
+        lines += [
+            "",
+            f"A rival formula is almost as probable: `{rival.get('rival')}` (log evidence of "
+            f"the kept one over it {_num(rival.get('log_evidence_ratio'))}).",
+        ]
+    if nxt:
+        pars = ", ".join(f"{k} {_num(v)}" for k, v in (nxt.get("parameters") or {}).items())
+        lines += [
+            "",
+            f"Next experiment to tell them apart: a {nxt.get('kind')} of `{nxt.get('signal')}` "
+            f"({pars}); the two formulas disagree {_num(nxt.get('gain'))} times more on it "
+            "than on the records (`next_experiment.csv`, a reference signal within the "
+            "records' travel, speed and force).",
+        ]
     return lines
