@@ -32,7 +32,6 @@ Augmentations of the predicted `T_bearing` [°C]:
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
@@ -59,6 +58,7 @@ from ._base import (
     check,
     predict,
 )
+from ._stats import ar1_draws, ar1_noise
 
 __all__ = ["StaticRegression", "ThermalFamily"]
 
@@ -352,16 +352,14 @@ def _needs_speed_levels(experiments: Sequence[Experiment]) -> str | None:
 # ------------------------------------------------------------------------------ family
 
 
-def _noise_sigma(y: np.ndarray) -> float:
-    """White-noise level of a sampled temperature from its second differences:
-    `Δ²y = Δ²s + Δ²e` with `var(Δ²e) = 6σ²`; a smooth signal (and a linear drift)
-    leaves nothing in `Δ²s`, and the median absolute deviation ignores the few steps at
-    speed changes."""
-    d2 = np.diff(np.asarray(y, float), 2)
-    if d2.size < 8:
-        return 0.0
-    mad = float(np.median(np.abs(d2 - np.median(d2))))
-    return 1.4826 * mad / math.sqrt(6.0)
+def _smooth(x: np.ndarray, dt: float, smoothing: float) -> np.ndarray:
+    """The zero-phase low-pass of a temperature input (cut-off period `smoothing` [s]),
+    along the last axis; skipped when the sampling is coarser than a quarter of it."""
+    n = x.shape[-1]
+    if not (smoothing > 4 * dt and n > 40):
+        return x
+    sos = ss.butter(2, 1.0 / smoothing, fs=1.0 / dt, output="sos")
+    return ss.sosfiltfilt(sos, x, axis=-1, padlen=min(n - 1, int(3 * smoothing / dt)))
 
 
 class ThermalFamily(AbstractFamily):
@@ -404,13 +402,10 @@ class ThermalFamily(AbstractFamily):
                 arrays[key] = np.zeros(n)
                 continue
             x = np.asarray(record[key], float)
-            if key != "v_m" and smoothing > 4 * dt and n > 40:
-                sos = ss.butter(2, 1.0 / smoothing, fs=1.0 / dt, output="sos")
-                x = ss.sosfiltfilt(sos, x, padlen=min(n - 1, int(3 * smoothing / dt)))
-            arrays[key] = x
+            arrays[key] = x if key == "v_m" else _smooth(x, dt, smoothing)
         y = np.asarray(record["T_bearing"], float)
         arrays["y"] = y
-        sigma = _noise_sigma(y)
+        sigma, _ = ar1_noise(y)
         ops: dict[str, np.ndarray] = {"T_chassis [°C]": arrays["T_chassis"]}
         masks: dict[str, np.ndarray] = {}
         if "T_air" in record.names:
@@ -525,15 +520,32 @@ class ThermalFamily(AbstractFamily):
         rng: np.random.Generator,
         count: int,
     ) -> list[list[Experiment]]:
-        """The calibrated regression on each record's own inputs, plus white noise of the
-        record's noise level (second differences of `T_bearing`)."""
+        """The calibrated regression on each record's own inputs, through the record's
+        measurement chain: the target `T_bearing` gets a noise of the record's level and
+        colour, and each smoothed temperature input a noise of its own record's level and
+        colour, smoothed like the input (errors in the variables: the sensor noise of the
+        inputs reaches the residual through the regression, below the smoothing's
+        cut-off). Every noise is the first-order autoregression (`ar1_noise`) its record's
+        differences measure: white for a white sensor, with its in-band power for a
+        coloured one (a white null would put a coloured noise's slow wander into the gap).
+        """
+        smoothing = float(self.options.get("smoothing_s", 60.0))
         out: list[list[Experiment]] = [[] for _ in range(count)]
         for exp in experiments:
             clean = predict(model, exp)
-            sigma = math.sqrt(max(exp.noise_var, 0.0))
+            sigma, rho = ar1_noise(exp.y)
+            ys = clean + ar1_draws(sigma, rho, clean.size, rng, count)
+            noisy: dict[str, np.ndarray] = {}
+            rec = exp.source
+            for key in ("T_chassis", "T_air", "T_water"):
+                if rec is None or key not in rec.names:
+                    continue
+                s_in, r_in = ar1_noise(np.asarray(rec[key], float))
+                draws = ar1_draws(s_in, r_in, clean.size, rng, count)
+                noisy[key] = exp.arrays[key] + _smooth(draws, exp.dt, smoothing)
             for k in range(count):
-                y = clean + sigma * rng.standard_normal(clean.shape)
-                out[k].append(dataclasses.replace(exp, arrays={**exp.arrays, "y": y}))
+                arrays = {**exp.arrays, "y": ys[k], **{key: x[k] for key, x in noisy.items()}}
+                out[k].append(dataclasses.replace(exp, arrays=arrays))
         return out
 
     def nominal_parameters(self, model) -> dict[str, float]:
