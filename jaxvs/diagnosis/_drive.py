@@ -859,6 +859,35 @@ def detect_events(
     return out
 
 
+def follows_command(events: np.ndarray, residual: np.ndarray, command: np.ndarray) -> bool:
+    """Whether the force of the events follows the recorded command rather than acting on
+    its own.
+
+    An unmeasured external force does not know the command: within an event it is a
+    level (`ExternalForce`'s model). A force that scales with the command -- a motor
+    force constant that drifts, a mass that changes -- has the command's shape within
+    each event. The two one-parameter-per-event descriptions of the residual (about its
+    median, the level the events are found against) are compared on all the events of
+    the record together: one level per event, or one multiple of the command per event;
+    when the command's multiples leave the smaller sum of squares, the events are not
+    external forces."""
+    ev = np.asarray(events) != 0
+    used = [k for k in range(ev.shape[1]) if ev[:, k].any()]
+    if not used:
+        return False
+    e = np.asarray(residual, float)
+    e = e - np.median(e)
+    u = np.asarray(command, float)
+    ssr_level = ssr_gain = 0.0
+    for k in used:
+        m = ev[:, k]
+        ek, uk = e[m], u[m]
+        ssr_level += float(np.sum((ek - ek.mean()) ** 2))
+        uu = float(uk @ uk)
+        ssr_gain += float(np.sum((ek - (ek @ uk) / uu * uk) ** 2)) if uu > 0 else float(ek @ ek)
+    return ssr_gain < ssr_level
+
+
 def _split_levels(e: np.ndarray, start: int, stop: int, w: int, step: float):
     """Pieces of constant level of the event `e[start:stop]`: unmeasured forces that
     overlap or follow each other without a pause (a pulse of one sign right after one of
@@ -1313,10 +1342,14 @@ def _refresh_events(exp: Experiment, residual: np.ndarray) -> Experiment:
     """Attach the event columns of the external-force candidate to an experiment: the
     pulses `detect_events` finds while the axis moves (the same standstill threshold as
     the operating-point cells, 2 % of the largest speed) and, when there is at least one,
-    a last column of ones for the unknown level between them (`ExternalForce`)."""
+    a last column of ones for the unknown level between them (`ExternalForce`). Events
+    whose force follows the recorded command (`follows_command`) are no external force:
+    the record then has none."""
     v = np.asarray(exp.arrays["v"])
     moving = np.abs(v) > STANDSTILL * float(np.max(np.abs(v)))
     ev = detect_events(residual, exp.dt, moving=moving)
+    if follows_command(ev, residual, exp.y):
+        ev[:] = 0.0
     if np.any(ev != 0):
         ev[:, -1] = 1.0
     return dataclasses.replace(exp, arrays={**exp.arrays, "events": ev})
