@@ -32,6 +32,7 @@ Augmentations of the predicted `T_bearing` [°C]:
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
@@ -58,7 +59,7 @@ from ._base import (
     check,
     predict,
 )
-from ._stats import ar1_draws, ar1_noise
+from ._stats import ar1_draws, ar1_noise, quantisation_step
 
 __all__ = ["StaticRegression", "ThermalFamily"]
 
@@ -352,6 +353,28 @@ def _needs_speed_levels(experiments: Sequence[Experiment]) -> str | None:
 # ------------------------------------------------------------------------------ family
 
 
+def _noise_sigma(y: np.ndarray) -> float:
+    """White-noise level of a sampled temperature from its second differences:
+    `Δ²y = Δ²s + Δ²e` with `var(Δ²e) = 6σ²`; a smooth signal (and a linear drift)
+    leaves nothing in `Δ²s`, and the median absolute deviation ignores the few steps at
+    speed changes."""
+    d2 = np.diff(np.asarray(y, float), 2)
+    if d2.size < 8:
+        return 0.0
+    mad = float(np.median(np.abs(d2 - np.median(d2))))
+    return 1.4826 * mad / math.sqrt(6.0)
+
+
+def _residual_noise(y: np.ndarray, residual: np.ndarray) -> tuple[float, float]:
+    """`(sigma, rho)` of the AR(1) noise in a regression's residual (see
+    `ThermalFamily.null_experiments`)."""
+    if quantisation_step(y) > 0:
+        d2 = np.diff(np.asarray(y, float), 2)
+        return (float(np.std(d2)) / math.sqrt(6.0) if d2.size else 0.0), 0.0
+    sigma, rho = ar1_noise(residual)
+    return min(sigma, float(np.std(residual))), rho
+
+
 def _smooth(x: np.ndarray, dt: float, smoothing: float) -> np.ndarray:
     """The zero-phase low-pass of a temperature input (cut-off period `smoothing` [s]),
     along the last axis; skipped when the sampling is coarser than a quarter of it."""
@@ -405,7 +428,7 @@ class ThermalFamily(AbstractFamily):
             arrays[key] = x if key == "v_m" else _smooth(x, dt, smoothing)
         y = np.asarray(record["T_bearing"], float)
         arrays["y"] = y
-        sigma, _ = ar1_noise(y)
+        sigma = _noise_sigma(y)
         ops: dict[str, np.ndarray] = {"T_chassis [°C]": arrays["T_chassis"]}
         masks: dict[str, np.ndarray] = {}
         if "T_air" in record.names:
@@ -520,32 +543,23 @@ class ThermalFamily(AbstractFamily):
         rng: np.random.Generator,
         count: int,
     ) -> list[list[Experiment]]:
-        """The calibrated regression on each record's own inputs, through the record's
-        measurement chain: the target `T_bearing` gets a noise of the record's level and
-        colour, and each smoothed temperature input a noise of its own record's level and
-        colour, smoothed like the input (errors in the variables: the sensor noise of the
-        inputs reaches the residual through the regression, below the smoothing's
-        cut-off). Every noise is the first-order autoregression (`ar1_noise`) its record's
-        differences measure: white for a white sensor, with its in-band power for a
-        coloured one (a white null would put a coloured noise's slow wander into the gap).
-        """
-        smoothing = float(self.options.get("smoothing_s", 60.0))
+        """The calibrated regression on each record's own inputs, plus a noise of the
+        level and colour of what the regression leaves of the record: the first-order
+        autoregression (`ar1_noise`) the residual's differences measure -- white for a
+        white sensor, with its in-band power for a coloured one (a white null of the
+        second-difference level puts a coloured sensor's slow wander into the gap; the
+        residual holds the inputs' sensor noise too, which reaches it through the
+        regression). The noise's level is bounded by the residual's own (a stationary
+        noise has no more variance than the residual it is part of); a quantised record
+        takes the white level of its second differences (quantisation breaks the robust
+        difference ratio)."""
         out: list[list[Experiment]] = [[] for _ in range(count)]
         for exp in experiments:
             clean = predict(model, exp)
-            sigma, rho = ar1_noise(exp.y)
+            sigma, rho = _residual_noise(exp.y, exp.y - clean)
             ys = clean + ar1_draws(sigma, rho, clean.size, rng, count)
-            noisy: dict[str, np.ndarray] = {}
-            rec = exp.source
-            for key in ("T_chassis", "T_air", "T_water"):
-                if rec is None or key not in rec.names:
-                    continue
-                s_in, r_in = ar1_noise(np.asarray(rec[key], float))
-                draws = ar1_draws(s_in, r_in, clean.size, rng, count)
-                noisy[key] = exp.arrays[key] + _smooth(draws, exp.dt, smoothing)
             for k in range(count):
-                arrays = {**exp.arrays, "y": ys[k], **{key: x[k] for key, x in noisy.items()}}
-                out[k].append(dataclasses.replace(exp, arrays=arrays))
+                out[k].append(dataclasses.replace(exp, arrays={**exp.arrays, "y": ys[k]}))
         return out
 
     def nominal_parameters(self, model) -> dict[str, float]:
