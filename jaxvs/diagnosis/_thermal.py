@@ -369,8 +369,7 @@ def _residual_noise(y: np.ndarray, residual: np.ndarray) -> tuple[float, float]:
     """`(sigma, rho)` of the AR(1) noise in a regression's residual (see
     `ThermalFamily.null_experiments`)."""
     if quantisation_step(y) > 0:
-        d2 = np.diff(np.asarray(y, float), 2)
-        return (float(np.std(d2)) / math.sqrt(6.0) if d2.size else 0.0), 0.0
+        return min(_noise_sigma(y), float(np.std(residual))), 0.0
     sigma, rho = ar1_noise(residual)
     return min(sigma, float(np.std(residual))), rho
 
@@ -551,8 +550,8 @@ class ThermalFamily(AbstractFamily):
         residual holds the inputs' sensor noise too, which reaches it through the
         regression). The noise's level is bounded by the residual's own (a stationary
         noise has no more variance than the residual it is part of); a quantised record
-        takes the white level of its second differences (quantisation breaks the robust
-        difference ratio)."""
+        takes the white level of its second differences' median absolute deviation, as
+        before (quantisation breaks the robust difference ratio)."""
         out: list[list[Experiment]] = [[] for _ in range(count)]
         for exp in experiments:
             clean = predict(model, exp)
