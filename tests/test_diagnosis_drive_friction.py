@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxvs.data import Record
+from jaxvs.diagnosis._base import Experiment
 from jaxvs.diagnosis._drive import (
     AsymmetricFrictionEffect,
     CoulombEffect,
@@ -20,6 +21,7 @@ from jaxvs.diagnosis._drive import (
     StribeckEffect,
     _refresh_events,
     detect_events,
+    follows_command,
 )
 
 FS = 1000.0  # record and controller rate [Hz]
@@ -271,3 +273,36 @@ def test_pulses_that_follow_each_other_without_a_pause_are_separate_events():
     one = 0.5 * rng.standard_normal(t.size)
     one[(t >= 1.0) & (t < 1.5)] += 30.0
     assert int(np.sum(np.any(detect_events(one, dt) != 0, axis=0))) == 1
+
+
+def test_a_force_that_follows_the_command_is_not_an_external_force():
+    """A motor force that sags by 10 % for 1.5 s (a supply dip) leaves the command's own
+    shape in the residual, `0.1 u`: it is found in pieces beyond the threshold, like pulses,
+    but within each piece it is a multiple of the command, not a level, so the record
+    has no external-force events. A 25 N load switched on during a move (same command)
+    keeps its event. Oracle: closed-form commands and residuals."""
+    rng = np.random.default_rng(4)
+    dt = 1e-3
+    t = np.arange(8000) * dt
+    v = 0.3 * np.sin(2 * np.pi * 0.6 * t) + 0.1 * np.sin(2 * np.pi * 1.7 * t)
+    a = np.gradient(v, dt)
+    u = 40.0 * a + 80.0 * v + 30.0 * np.tanh(v / 0.01)
+    noise = 0.3 * rng.standard_normal(t.size)
+    cases = {
+        "gain": 0.1 * u * ((t > 3.0) & (t < 4.5)) + noise,
+        "load": np.where((t > 4.2) & (t < 4.6), 25.0, 0.0) + noise,
+    }
+    for name, res in cases.items():
+        exp = Experiment(
+            "x", t, {"y": u, "v": v, "a": a, "q": np.cumsum(v) * dt}, {}, {}, 0.09, frozenset()
+        )
+        found = detect_events(res, dt)
+        assert np.any(found != 0)  # pieces beyond the threshold in both
+        ev = np.asarray(_refresh_events(exp, res).arrays["events"])
+        used = np.flatnonzero(np.any(ev != 0, axis=0))
+        if name == "gain":
+            assert follows_command(found, res, u)
+            assert used.size == 0
+        else:
+            assert not follows_command(found, res, u)
+            assert used.tolist() == [0, ev.shape[1] - 1]

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import scipy.signal as ss
 
-from jaxvs.diagnosis._base import AdmissibilityContext
-from jaxvs.diagnosis._drive import Backlash, PositionForceEffect, TimeDelay
+from jaxvs.diagnosis._base import AdmissibilityContext, Experiment
+from jaxvs.diagnosis._drive import Backlash, PositionForceEffect, TimeDelay, coulomb_level
 
 # a 1 kHz record of a 25 kg axis with a 1 µm encoder over 0.2 m, analysed up to 100 Hz
 AXIS = AdmissibilityContext(1e-3, 2.5e-3, (0.2, 100.0), 1e-6, span=0.2, nominal={"M": 25.0})
@@ -159,6 +159,43 @@ def test_a_friction_loaded_gap_within_the_presliding_range_is_not_a_backlash():
     # and a 0.2 mm friction-loaded gap is one
     wide = Backlash(jnp.array([3.0, 40.0]), jnp.asarray(1e-4), vs, both, 2.5e-3)
     assert wide.admissible(ctx) == (True, None)
+
+
+def test_a_friction_loaded_gap_needs_the_dry_friction_the_axis_drags():
+    """A table held by friction `F_L` behind a play is dragged whenever the play is
+    closed: the axis shows at least `F_L` of dry friction while it moves. Oracle: a
+    force with a closed-form Coulomb level (40 N) and one with fluid drag `c v|v|`,
+    which a linear viscous law plus a constant reads as a negative dry friction."""
+    rng = np.random.default_rng(2)
+    t = np.arange(20_000) * 1e-3
+    v = 0.5 * np.sin(2 * np.pi * 0.5 * t) + 0.2 * np.sin(2 * np.pi * 1.3 * t)
+    a = np.gradient(v, 1e-3)
+    found = {}
+    for name, force in (
+        ("coulomb", 25.0 * a + 80.0 * v + 40.0 * np.sign(v)),
+        ("drag", 25.0 * a + 80.0 * v + 300.0 * v * np.abs(v)),
+    ):
+        exp = Experiment(
+            "x", t, {"y": force + rng.normal(size=t.size), "v": v, "a": a}, {}, {}, 1.0, frozenset()
+        )
+        found[name] = coulomb_level([exp])
+    assert found["coulomb"]["coulomb_level"] == pytest.approx(40.0, abs=0.1)
+    assert found["drag"]["coulomb_level"] < -10.0
+    vs, friction = jnp.asarray(1e-3), jnp.array([0.0, 1.0])
+    load = Backlash(jnp.array([0.0, 8.0]), jnp.asarray(5e-3), vs, friction, 2.5e-3)
+    for name, ok in (("coulomb", True), ("drag", False)):
+        ctx = AdmissibilityContext(
+            1e-3, 2.5e-3, (0.2, 100.0), 1e-6, span=0.8, nominal={"M": 25.0, **found[name]}
+        )
+        verdict, why = load.admissible(ctx)
+        assert verdict is ok
+        assert ok or "dragged whenever the gap is closed" in why
+    # an inertial load needs no friction
+    inertial = Backlash(jnp.array([3.0, 0.0]), jnp.asarray(5e-3), vs, jnp.ones(2), 2.5e-3)
+    ctx = AdmissibilityContext(
+        1e-3, 2.5e-3, (0.2, 100.0), 1e-6, span=0.8, nominal={"M": 25.0, **found["drag"]}
+    )
+    assert inertial.admissible(ctx) == (True, None)
 
 
 def test_a_position_force_does_not_make_the_mass_unidentifiable():

@@ -1,5 +1,6 @@
-"""The drive null carries the recorded force's own noise, coloured or white, and no
-disturbance the force carries besides it.
+"""The nulls carry the record's own noise, coloured or white: the drive's force noise and
+no disturbance the force carries besides it; the thermal sensors' first-order
+autoregressive noise.
 
 Oracles: the closed-form variance and lag-one correlation of an AR(1) noise
 (`x_k = ρ x_{k−1} + sqrt(1−ρ²) σ w_k`: variance σ², correlation ρ) and a closed loop
@@ -9,13 +10,16 @@ of the library's twins and models.
 
 import math
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.signal as ss
 
 from jaxvs.data import Record
+from jaxvs.diagnosis._base import GapModel, predict
 from jaxvs.diagnosis._drive import _controller_fit, _null_records, force_noise
-from jaxvs.diagnosis._stats import difference_noise_sigma, noise_like
+from jaxvs.diagnosis._stats import ar1_noise, difference_noise_sigma, noise_like
+from jaxvs.diagnosis._thermal import StaticRegression, ThermalFamily
 
 
 def _ar1(rng, n, sigma, rho):
@@ -108,3 +112,50 @@ def test_force_noise_keeps_a_gaussian_coloured_noise():
     draws = force_noise(e, 1000.0, 100.0, np.random.default_rng(8), 4)
     assert np.std(draws) == pytest.approx(1.0, rel=0.15)
     assert np.mean([_lag1(d) for d in draws]) == pytest.approx(0.95, abs=0.02)
+
+
+def _thermal_record(rng, n, dt, sigma, rho):
+    """A bearing temperature that follows the chassis (closed form: a slow first-order
+    heating, `T_b = 2 + 0.9 T_ch`) with AR(1) sensor noise on both channels."""
+    t = np.arange(n) * dt
+    t_ch = 25.0 + 8.0 * (1.0 - np.exp(-t / 5400.0))
+    t_b = 2.0 + 0.9 * t_ch
+    return Record(
+        {
+            "T_chassis": t_ch + _ar1(rng, n, sigma, rho),
+            "T_bearing": t_b + _ar1(rng, n, sigma, rho),
+        },
+        dt=dt,
+    )
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.95])
+def test_ar1_noise_measures_level_and_colour_beside_a_slow_temperature(rho):
+    """`ar1_noise` on an AR(1) noise over a heating curve: the closed-form variance and
+    correlation of the noise, not the curve's; white noise is called white."""
+    rec = _thermal_record(np.random.default_rng(9), 14_400, 1.0, 0.05, rho)
+    sigma, rho_hat = ar1_noise(np.asarray(rec["T_bearing"]))
+    assert sigma == pytest.approx(0.05, rel=0.15)
+    assert rho_hat == pytest.approx(rho, abs=0.03)
+    if rho == 0.0:
+        assert rho_hat == 0.0  # within the white noise's sampling spread
+
+
+def test_thermal_null_carries_the_residuals_coloured_noise():
+    """The thermal null draws the AR(1) noise the regression's residual shows (its
+    variance and correlation): a white null of the second-difference level (0.16 σ at
+    ρ = 0.95) put a coloured sensor's wander into the gap."""
+    sigma, rho = 0.05, 0.95
+    rec = _thermal_record(np.random.default_rng(10), 14_400, 1.0, sigma, rho)
+    rec = Record(
+        {"T_chassis": 25.0 + 8.0 * (1.0 - np.exp(-rec.t / 5400.0)), "T_bearing": rec["T_bearing"]},
+        dt=1.0,
+    )
+    fam = ThermalFamily()
+    exp = fam.prepare(rec, "cal")
+    model = GapModel(StaticRegression(jnp.array([2.0, 0.9]), use_speed=False))
+    clean = predict(model, exp)
+    (null,) = zip(*fam.null_experiments(model, [exp], np.random.default_rng(11), 6))
+    noise = np.stack([e.y - clean for e in null])
+    assert np.std(noise) == pytest.approx(sigma, rel=0.2)
+    assert np.mean([_lag1(x) for x in noise]) == pytest.approx(rho, abs=0.03)

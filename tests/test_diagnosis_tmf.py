@@ -248,6 +248,42 @@ def test_null_noise_is_the_noise_not_the_gap_of_an_unmodelled_force():
     assert float(np.mean(added)) == pytest.approx(sigma, rel=0.10)
 
 
+def test_null_noise_is_the_noise_not_a_sensors_static_nonlinearity():
+    """A tool-side sensor with a cubic calibration error, `x + c (x − x̄)³/var(x)` (a
+    distortion 10 times the noise): what no linear map of `x_e` explains is the noise
+    plus the distortion, but the noise regression's Volterra columns (squares and cubes
+    of the linear response) take the distortion, so the null adds the noise only and the
+    distortion stays in the gap. Oracle: a scipy ZOH simulation of a 1-mode TMF, noise σ;
+    the same estimate on the linear sensor."""
+    import scipy.signal as ss
+
+    from jaxvs.data import Record
+    from jaxvs.diagnosis._base import GapModel
+    from jaxvs.diagnosis._tmf import TMFFamily, record_noise
+
+    dt, n = 1e-3, 6000
+    w = 2 * np.pi * 40.0
+    den = [1.0, 2 * 0.05 * w, w * w]
+    rng = np.random.default_rng(6)
+    xe = np.cumsum(rng.normal(size=n)) * 1e-7
+    xe -= xe[0]
+    ad, bd, cd, dd, _ = ss.cont2discrete(ss.tf2ss([w * w], den), dt, method="zoh")
+    lin = ss.dlsim((ad, bd, cd, dd, dt), xe)[1][:, 0]
+    sigma = 0.002 * float(np.std(lin))
+    d = lin - lin.mean()
+    family = TMFFamily(order=2)
+    model = GapModel(StableTMF.from_rational(jaxvs.RationalTF([w * w], den), 100.0, dt))
+    found = []
+    for c in (0.0, 0.02):
+        xt = lin + c * d**3 / np.var(d) + sigma * rng.normal(size=n)
+        exp = family.prepare(Record({"x_e": xe, "x_t": xt}, dt=dt), "sensor")
+        found.append(np.sqrt(record_noise(exp, [model.nominal], 150)[0]))
+        if c > 0:  # the distortion is far above the noise
+            assert np.std(c * d**3 / np.var(d)) > 10 * sigma
+    assert found[0] == pytest.approx(sigma, rel=0.15)
+    assert found[1] == pytest.approx(sigma, rel=0.15)
+
+
 def _multisine(t, rng, f_max, count=400):
     """A band-limited signal with a closed form at any time `t` [samples]: `count`
     sinusoids of random frequencies below `f_max` [cycles/sample] and phases."""

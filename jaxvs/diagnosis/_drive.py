@@ -340,6 +340,8 @@ class Backlash(AbstractAdditiveEffect):
         gap = 2 * _f(self.b)
         res = context.resolution
         mass = float(context.nominal.get("M", np.inf))
+        coulomb = float(context.nominal.get("coulomb_level", np.inf))
+        coulomb_se = float(context.nominal.get("coulomb_level_se", 0.0))
         return check(
             (_ok(self.size) and np.isfinite(gap), "non-finite backlash parameters"),
             (
@@ -356,6 +358,12 @@ class Backlash(AbstractAdditiveEffect):
             (m >= 0, f"negative load mass m_L = {m:.4g} kg"),
             (m <= mass, f"load mass m_L = {m:.4g} kg above the whole moving mass {mass:.4g} kg"),
             (fl >= 0, f"negative load friction F_L = {fl:.4g} N"),
+            (
+                fl <= 0 or not fl > coulomb + 3.0 * coulomb_se,
+                f"load friction F_L = {fl:.4g} N behind the gap, but the axis drags a dry "
+                f"friction of {coulomb:.4g} ± {coulomb_se:.2g} N while it moves: a load "
+                "carried by friction is dragged whenever the gap is closed",
+            ),
             (m > 0 or fl > 0, "neither a load mass nor a load friction behind the gap"),
         )
 
@@ -851,6 +859,35 @@ def detect_events(
     return out
 
 
+def follows_command(events: np.ndarray, residual: np.ndarray, command: np.ndarray) -> bool:
+    """Whether the force of the events follows the recorded command rather than acting on
+    its own.
+
+    An unmeasured external force does not know the command: within an event it is a
+    level (`ExternalForce`'s model). A force that scales with the command -- a motor
+    force constant that drifts, a mass that changes -- has the command's shape within
+    each event. The two one-parameter-per-event descriptions of the residual (about its
+    median, the level the events are found against) are compared on all the events of
+    the record together: one level per event, or one multiple of the command per event;
+    when the command's multiples leave the smaller sum of squares, the events are not
+    external forces."""
+    ev = np.asarray(events) != 0
+    used = [k for k in range(ev.shape[1]) if ev[:, k].any()]
+    if not used:
+        return False
+    e = np.asarray(residual, float)
+    e = e - np.median(e)
+    u = np.asarray(command, float)
+    ssr_level = ssr_gain = 0.0
+    for k in used:
+        m = ev[:, k]
+        ek, uk = e[m], u[m]
+        ssr_level += float(np.sum((ek - ek.mean()) ** 2))
+        uu = float(uk @ uk)
+        ssr_gain += float(np.sum((ek - (ek @ uk) / uu * uk) ** 2)) if uu > 0 else float(ek @ ek)
+    return ssr_gain < ssr_level
+
+
 def _split_levels(e: np.ndarray, start: int, stop: int, w: int, step: float):
     """Pieces of constant level of the event `e[start:stop]`: unmeasured forces that
     overlap or follow each other without a pause (a pulse of one sign right after one of
@@ -899,6 +936,31 @@ JACOBIAN_RTOL = 1e-3
 which a drive record is refused (heuristic: at 1e-3 a parameter combination is a
 thousand times less determined than the best one; the search's recalibrations trade it
 with every effect)."""
+
+
+def coulomb_level(experiments: Sequence[Experiment]) -> dict[str, float]:
+    """The dry friction level the records show while the axis moves: the coefficient of
+    `sign(q̇)` in a least-squares fit of the force by `q̈`, `q̇`, `sign(q̇)` and a constant
+    on the samples above `REVERSAL_SPEED` of the largest speed (away from the
+    reversals, where a play is crossed and friction laws differ), with its standard
+    error (white residual). `{"coulomb_level": Fc, "coulomb_level_se": se}`; `nan` when
+    the records do not move both ways."""
+    y = np.concatenate([e.y for e in experiments])
+    a = np.concatenate([e.arrays["a"] for e in experiments])
+    v = np.concatenate([e.arrays["v"] for e in experiments])
+    fast = np.abs(v) > REVERSAL_SPEED * float(np.max(np.abs(v)))
+    nan = {"coulomb_level": float("nan"), "coulomb_level_se": float("nan")}
+    if np.sum(fast & (v > 0)) < 10 or np.sum(fast & (v < 0)) < 10:
+        return nan
+    phi = np.stack([a, v, np.sign(v), np.ones_like(v)], -1)[fast]
+    th, *_ = np.linalg.lstsq(phi, y[fast], rcond=None)
+    res = y[fast] - phi @ th
+    dof = max(res.size - phi.shape[1], 1)
+    try:
+        cov = np.linalg.inv(phi.T @ phi) * float(res @ res) / dof
+    except np.linalg.LinAlgError:
+        return nan
+    return {"coulomb_level": float(th[2]), "coulomb_level_se": float(np.sqrt(cov[2, 2]))}
 
 
 def mass_not_excited(experiments: Sequence[Experiment]) -> str | None:
@@ -1100,7 +1162,7 @@ class DriveFamily(AbstractFamily):
             resolution=max(e.resolution for e in experiments),
             duration=dur,
             span=float(np.ptp(q)),
-            nominal=self.nominal_parameters(model),
+            nominal={**self.nominal_parameters(model), **coulomb_level(experiments)},
         )
 
     def null_experiments(
@@ -1269,15 +1331,24 @@ STANDSTILL = 0.02
 """Share of the largest speed below which an axis counts as standing still (the
 standstill cell of the gap map, and where external-force events are not sought)."""
 
+REVERSAL_SPEED = 0.1
+"""Share of the largest speed below which a passage between motions of opposite sign is
+a velocity reversal (the reversal cell of the gap map; the dry friction level is read
+above it, see `coulomb_level`)."""
+
 
 def _refresh_events(exp: Experiment, residual: np.ndarray) -> Experiment:
     """Attach the event columns of the external-force candidate to an experiment: the
     pulses `detect_events` finds while the axis moves (the same standstill threshold as
     the operating-point cells, 2 % of the largest speed) and, when there is at least one,
-    a last column of ones for the unknown level between them (`ExternalForce`)."""
+    a last column of ones for the unknown level between them (`ExternalForce`). Events
+    whose force follows the recorded command (`follows_command`) are no external force:
+    the record then has none."""
     v = np.asarray(exp.arrays["v"])
     moving = np.abs(v) > STANDSTILL * float(np.max(np.abs(v)))
     ev = detect_events(residual, exp.dt, moving=moving)
+    if follows_command(ev, residual, exp.y):
+        ev[:] = 0.0
     if np.any(ev != 0):
         ev[:, -1] = 1.0
     return dataclasses.replace(exp, arrays={**exp.arrays, "events": ev})
@@ -1288,7 +1359,7 @@ def _drive_masks(v: np.ndarray, vmax: float, dt: float) -> dict[str, np.ndarray]
     |v| < 10 % of the largest speed, between motions of opposite sign), standstill
     (|v| < 2 %, not a reversal), and the two directions."""
     thr = STANDSTILL * vmax
-    low = np.abs(v) < 0.1 * vmax
+    low = np.abs(v) < REVERSAL_SPEED * vmax
     sign = np.sign(v)
     # runs of constant `low`; a low run is a reversal when the motion before and after it
     # has opposite signs (runs touching the record's ends are not)

@@ -59,6 +59,7 @@ from ._base import (
     check,
     predict,
 )
+from ._stats import ar1_draws, ar1_noise, quantisation_step
 
 __all__ = ["StaticRegression", "ThermalFamily"]
 
@@ -364,6 +365,25 @@ def _noise_sigma(y: np.ndarray) -> float:
     return 1.4826 * mad / math.sqrt(6.0)
 
 
+def _residual_noise(y: np.ndarray, residual: np.ndarray) -> tuple[float, float]:
+    """`(sigma, rho)` of the AR(1) noise in a regression's residual (see
+    `ThermalFamily.null_experiments`)."""
+    if quantisation_step(y) > 0:
+        return min(_noise_sigma(y), float(np.std(residual))), 0.0
+    sigma, rho = ar1_noise(residual)
+    return min(sigma, float(np.std(residual))), rho
+
+
+def _smooth(x: np.ndarray, dt: float, smoothing: float) -> np.ndarray:
+    """The zero-phase low-pass of a temperature input (cut-off period `smoothing` [s]),
+    along the last axis; skipped when the sampling is coarser than a quarter of it."""
+    n = x.shape[-1]
+    if not (smoothing > 4 * dt and n > 40):
+        return x
+    sos = ss.butter(2, 1.0 / smoothing, fs=1.0 / dt, output="sos")
+    return ss.sosfiltfilt(sos, x, axis=-1, padlen=min(n - 1, int(3 * smoothing / dt)))
+
+
 class ThermalFamily(AbstractFamily):
     """Inner bearing temperature of a motor spindle from chassis temperature and speed.
 
@@ -404,10 +424,7 @@ class ThermalFamily(AbstractFamily):
                 arrays[key] = np.zeros(n)
                 continue
             x = np.asarray(record[key], float)
-            if key != "v_m" and smoothing > 4 * dt and n > 40:
-                sos = ss.butter(2, 1.0 / smoothing, fs=1.0 / dt, output="sos")
-                x = ss.sosfiltfilt(sos, x, padlen=min(n - 1, int(3 * smoothing / dt)))
-            arrays[key] = x
+            arrays[key] = x if key == "v_m" else _smooth(x, dt, smoothing)
         y = np.asarray(record["T_bearing"], float)
         arrays["y"] = y
         sigma = _noise_sigma(y)
@@ -525,15 +542,23 @@ class ThermalFamily(AbstractFamily):
         rng: np.random.Generator,
         count: int,
     ) -> list[list[Experiment]]:
-        """The calibrated regression on each record's own inputs, plus white noise of the
-        record's noise level (second differences of `T_bearing`)."""
+        """The calibrated regression on each record's own inputs, plus a noise of the
+        level and colour of what the regression leaves of the record: the first-order
+        autoregression (`ar1_noise`) the residual's differences measure -- white for a
+        white sensor, with its in-band power for a coloured one (a white null of the
+        second-difference level puts a coloured sensor's slow wander into the gap; the
+        residual holds the inputs' sensor noise too, which reaches it through the
+        regression). The noise's level is bounded by the residual's own (a stationary
+        noise has no more variance than the residual it is part of); a quantised record
+        takes the white level of its second differences' median absolute deviation, as
+        before (quantisation breaks the robust difference ratio)."""
         out: list[list[Experiment]] = [[] for _ in range(count)]
         for exp in experiments:
             clean = predict(model, exp)
-            sigma = math.sqrt(max(exp.noise_var, 0.0))
+            sigma, rho = _residual_noise(exp.y, exp.y - clean)
+            ys = clean + ar1_draws(sigma, rho, clean.size, rng, count)
             for k in range(count):
-                y = clean + sigma * rng.standard_normal(clean.shape)
-                out[k].append(dataclasses.replace(exp, arrays={**exp.arrays, "y": y}))
+                out[k].append(dataclasses.replace(exp, arrays={**exp.arrays, "y": ys[k]}))
         return out
 
     def nominal_parameters(self, model) -> dict[str, float]:

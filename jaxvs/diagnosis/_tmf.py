@@ -681,16 +681,53 @@ def periodic_noise(
     return max(var - resolution**2 / 12.0, 0.0), float(np.clip(rho, 0.0, 0.99))
 
 
+def _distortion_basis(
+    linear: np.ndarray, xe: np.ndarray, xt: np.ndarray, models: Sequence[StableTMF]
+) -> np.ndarray:
+    """Columns for the nonlinear distortion of a structure driven by `x_e`: the squares
+    and cubes of the linear response `x̂_t` (the pole-basis columns `linear` fitted to
+    `x_t`), of the deflection `x_e − x̂_t` and of its rate, each as it is (a static
+    nonlinearity of the sensor) and filtered through the poles of each TMF of `models`
+    (a nonlinear force inside the structure: a stiffness that grows with the amplitude,
+    dry friction in a joint, whose response rings with the structure's modes). The
+    second- and third-degree terms of a Volterra series of the structure (Schetzen,
+    *The Volterra and Wiener Theories of Nonlinear Systems*, 1980), in the structure's own
+    modal basis. On a linear structure they explain nothing but their share of the noise,
+    which the degrees-of-freedom correction removes; on a nonlinear one they keep the
+    distortion out of the noise, where it would raise the floor to the gap."""
+    a = np.concatenate([linear, np.ones((linear.shape[0], 1))], axis=1)
+    th, *_ = np.linalg.lstsq(a, xt, rcond=None)
+    fit = a @ th
+    defl = xe - fit
+    rate = np.gradient(defl)
+    cols = []
+    for z in (fit, defl, rate):
+        z = z - z.mean()
+        sd = float(np.std(z))
+        if sd <= 0:
+            continue
+        z = z / sd
+        for power in (z * z, z * z * z):
+            cols.append(power[:, None])
+            cols.extend(_pole_basis(m, power) for m in models)
+    if not cols:
+        return np.zeros((xe.size, 0))
+    return np.concatenate(cols, axis=1)
+
+
 def record_noise(exp: Experiment, models: Sequence[StableTMF], taps: int) -> tuple[float, float]:
     """The measurement noise of one experiment's `x_t`: variance and lag-one
-    autocorrelation of what no linear time-invariant map of the inputs explains.
+    autocorrelation of what no time-invariant map of the inputs explains.
 
     The regression holds an FIR window of `x_e` and `f` (delays, short responses) and
     both inputs filtered through the poles of each TMF of `models`
     ([`_pole_basis`][]: the calibrated nominal TMF, and one fitted to this experiment
     alone, whose poles are right where a position moves them), so a lightly damped mode
     or a force compliance that rings past the window is explained rather than counted
-    as noise. Every effect of the library is linear and
+    as noise. The squares and cubes of the linear response, its deflection and the
+    deflection's rate, as they are and through the same poles ([`_distortion_basis`][]),
+    keep a nonlinear distortion out of the noise: a distortion above the noise is a
+    finding the gap must show, never part of the floor. Every effect of the library is linear and
     time-invariant within one experiment (one position y), so on a record with an effect
     the estimate is still the noise, not the gap. The variance is corrected for the
     fitted parameters and less the record's own quantisation `Δ²/12` (the null quantises
@@ -705,6 +742,7 @@ def record_noise(exp: Experiment, models: Sequence[StableTMF], taps: int) -> tup
     has_f = "f" in exp.signals and float(np.ptp(f)) > 0
     inputs = [xe, f] if has_f else [xe]
     extra = np.concatenate([_pole_basis(m, u) for m in models for u in inputs], axis=1)
+    extra = np.concatenate([extra, _distortion_basis(extra, xe, exp.y, models)], axis=1)
     out = _fir_residual(xe, exp.y, f if has_f else None, taps, extra)
     if out is None:
         return float(exp.noise_var), 0.0
