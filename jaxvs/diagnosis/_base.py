@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import types
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
@@ -357,7 +358,9 @@ class AbstractFamily(abc.ABC):
                 f"diagnose(family={self.name!r}): unknown option(s) {unknown}; the "
                 f"{self.name} family takes {list(self.option_keys)}."
             )
-        self.options = dict(options)
+        # read-only: what a family derives from the data is returned (`prepare`'s
+        # experiments, `settings`), never written back into its options
+        self.options: Mapping[str, Any] = types.MappingProxyType(dict(options))
 
     @abc.abstractmethod
     def prepare(self, record: Record, name: str) -> Experiment:
@@ -394,6 +397,11 @@ class AbstractFamily(abc.ABC):
         """`count` effect-free copies of `experiments`: the calibrated model `model`
         simulated through each record's own set-up (sampling, quantisation, noise level,
         loop and preprocessing). Returns `count` lists, each like `experiments`."""
+
+    def settings(self, experiments: Sequence[Experiment]) -> dict[str, Any]:
+        """The options as the analysis of `experiments` used them, with the values it
+        derived from the data (e.g. a default cut-off); the report's `data.options`."""
+        return dict(self.options)
 
     def nominal_parameters(self, model: GapModel) -> dict[str, float]:
         """The calibrated nominal model's physical parameters, by name (every nominal

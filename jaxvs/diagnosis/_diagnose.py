@@ -397,7 +397,7 @@ def _data_json(setup: _Setup, res=None) -> dict[str, Any]:
         val = [{"name": e.name, "samples": e.n} for e in res.validation]
     out = {"calibration": cal, "validation": val, "holdout": setup.how}
     if res is not None and res.calibration:
-        opts = setup.fam.options
+        opts = setup.fam.settings(res.calibration)
         out["options"] = {k: v for k, v in opts.items() if isinstance(v, int | float | str)}
     return out
 

@@ -55,6 +55,7 @@ from .. import models
 from .._misc import legendre
 from ..calibration import bounded, fixed, positive, unwrap
 from ..data import Record
+from ..signal import DriveBand
 from ._base import (
     AbstractAdditiveEffect,
     AbstractEffect,
@@ -718,7 +719,8 @@ def _t_resonance(ctx: Context) -> list[AbstractEffect]:
     fs = 1.0 / dt
     e = np.concatenate([np.asarray(r) for r in ctx.residuals])
     f, p = ss.welch(e - e.mean(), fs=fs, nperseg=min(e.size, 2048))
-    band = (f > 2.0) & (f < 0.8 * float(ctx.options.get("cutoff_hz", fs / 2)))
+    cutoff = drive_band(ctx.options, exp0.record_dt).cutoff_hz
+    band = (f > 2.0) & (f < 0.8 * cutoff)
     peaks, props = ss.find_peaks(np.where(band, p, 0.0), prominence=0)
     top = peaks[np.argsort(props["prominences"])[::-1][:2]] if peaks.size else []
     freqs = [float(f[i]) for i in top] or [fs / 10]
@@ -1055,36 +1057,19 @@ class DriveFamily(AbstractFamily):
 
     def prepare(self, record: Record, name: str) -> Experiment:
         fs = 1.0 / record.dt
-        cutoff = float(self.options.get("cutoff_hz") or min(fs / 8.0, 100.0))
-        if not 0 < cutoff < fs / 2:
-            raise ValueError(
-                f"diagnose(drive): cutoff_hz={cutoff} must lie in (0, fs/2 = {fs / 2:g}) Hz."
-            )
-        self.options["cutoff_hz"] = cutoff
-        order = int(self.options.get("filter_order", 4))
-        nd = int(self.options.get("decimation") or max(1, int(fs / (4.0 * cutoff))))
+        # the analysis band (zero-phase low-pass, derivatives, the held force's half-sample
+        # shift, decimation): derived from the record, never written back into the options
+        band = drive_band(self.options, record.dt)
         q = np.asarray(record["q"], float)
-        u = np.asarray(record["u"], float)
-        if self.options.get("zoh_force", True):
-            # a digital drive holds each force sample over the next period: its mean time
-            # is half a sample later than its time stamp (Franklin, Powell & Workman,
-            # *Digital Control of Dynamic Systems*, §6.3), so the force acting at t_k is
-            # the mean of the held samples k-1 and k.
-            u = np.concatenate([u[:1], 0.5 * (u[1:] + u[:-1])])
-        n_min = 20 * nd + 64
+        u = band.held(np.asarray(record["u"], float))
+        n_min = band.min_samples
         if q.size < n_min:
             raise ValueError(
                 f"diagnose(drive): experiment {name!r} has {q.size} samples; at least {n_min} "
                 "are needed for filtering and differentiation. Give longer records."
             )
-        sos = ss.butter(order, cutoff, fs=fs, output="sos")
-        pad = int(min(q.size - 1, 3 * fs / cutoff))
-        qf = ss.sosfiltfilt(sos, q, padlen=pad)
-        uf = ss.sosfiltfilt(sos, u, padlen=pad)
-        v = np.gradient(qf, 1.0 / fs, edge_order=2)
-        a = np.gradient(v, 1.0 / fs, edge_order=2)
-        edge = int(math.ceil(3 * fs / cutoff))
-        sl = slice(edge, q.size - edge, nd)
+        sig = band.apply(q, np.asarray(record["u"], float))
+        qf, uf, v, a, sl = sig.q, sig.u, sig.v, sig.a, sig.window
         t = np.asarray(record.t)[sl]
         arrays = {"q": qf[sl], "v": v[sl], "a": a[sl], "y": uf[sl]}
         if float(np.ptp(q)) == 0.0:
@@ -1094,12 +1079,10 @@ class DriveFamily(AbstractFamily):
             )
         # noise: the white part of the force above the cut-off, carried into the band
         s0, _ = white_noise_floor(u - uf, fs)
-        w, h = ss.sosfreqz(sos, worN=4096, fs=fs)
-        enbw = float(np.trapezoid(np.abs(h) ** 4, w))
-        noise_var = s0 * enbw
+        noise_var = s0 * band.enbw
         vmax = float(np.max(np.abs(arrays["v"])))
         vv = arrays["v"]
-        masks = _drive_masks(vv, vmax, 1.0 / fs * nd)
+        masks = _drive_masks(vv, vmax, 1.0 / fs * band.decimation)
         for sig in record.names:
             if sig in self._MODEL_SIGNALS:
                 continue
@@ -1158,7 +1141,7 @@ class DriveFamily(AbstractFamily):
         return AdmissibilityContext(
             record_dt=max(e.record_dt or e.dt for e in experiments),
             analysis_dt=experiments[0].dt,
-            band_hz=(2.0 / dur, float(self.options["cutoff_hz"])),
+            band_hz=(2.0 / dur, drive_band(self.options, experiments[0].record_dt).cutoff_hz),
             resolution=max(e.resolution for e in experiments),
             duration=dur,
             span=float(np.ptp(q)),
@@ -1198,6 +1181,17 @@ class DriveFamily(AbstractFamily):
             for k, sim in enumerate(sims):
                 out[k].append(self.prepare(sim, exp.name))
         return out
+
+    def settings(self, experiments: Sequence[Experiment]) -> dict[str, Any]:
+        """The options with the analysis band derived from the records' sampling rate."""
+        band = drive_band(self.options, experiments[0].record_dt)
+        return {
+            **self.options,
+            "cutoff_hz": band.cutoff_hz,
+            "filter_order": band.order,
+            "decimation": band.decimation,
+            "zoh_force": band.hold,
+        }
 
     def describe_nominal(self) -> str:
         return "rigid axis M q̈ + Fv q̇ + offset = u (inverse dynamics, force predicted from motion)"
@@ -1465,6 +1459,19 @@ def force_noise(
     return difference_noise_sigma(e) * rng.standard_normal((count, e.size))
 
 
+def drive_band(options: Mapping[str, Any], dt: float) -> DriveBand:
+    """The analysis band of a drive record sampled every `dt` under the family's options
+    (`cutoff_hz`, `filter_order`, `decimation`, `zoh_force`)."""
+    return DriveBand.of(
+        1.0 / float(dt),
+        options.get("cutoff_hz"),
+        order=int(options.get("filter_order", 4)),
+        decimation=options.get("decimation"),
+        hold=bool(options.get("zoh_force", True)),
+        who="diagnose(drive)",
+    )
+
+
 def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Record]:
     q = np.asarray(rec["q"], float)
     u = np.asarray(rec["u"], float)
@@ -1472,10 +1479,9 @@ def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Recor
     fs = 1.0 / dt
     n = q.size
     step = quantisation_step(q)
-    cutoff = float(options["cutoff_hz"])
-    sos = ss.butter(int(options.get("filter_order", 4)), cutoff, fs=fs, output="sos")
-    pad = int(min(n - 1, 3 * fs / cutoff))
-    qf = ss.sosfiltfilt(sos, q, padlen=pad)
+    band = drive_band(options, dt)
+    cutoff = band.cutoff_hz
+    qf = band.lowpass(q)
     sigma_q = 0.0 if step > 0 else float(np.std(q - qf))
     quantise = _quantiser(step, sigma_q, rng, count)
     sims = None
@@ -1498,13 +1504,12 @@ def _null_records(rec: Record, mass, fv, off, rng, count, options) -> list[Recor
     if sims is None:
         # replay of the record's in-band motion; the force acting at t_k + dt/2 is what a
         # held sample represents (see `prepare`)
-        v = np.gradient(qf, dt, edge_order=2)
-        a = np.gradient(v, dt, edge_order=2)
+        v, a = band.derivatives(qf)
         force = mass * a + fv * v + off
-        if options.get("zoh_force", True):
+        if band.hold:
             t = np.arange(n) * dt
             force = np.interp(t + 0.5 * dt, t, force)
-        sigma_u = white_noise_floor(u - ss.sosfiltfilt(sos, u, padlen=pad), fs)[1]
+        sigma_u = white_noise_floor(u - band.lowpass(u), fs)[1]
         u_sim = force[None, :] + sigma_u * rng.standard_normal((count, n))
         q_sim = quantise(np.broadcast_to(qf, (count, n)))
         sims = (q_sim, u_sim)

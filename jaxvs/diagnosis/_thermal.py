@@ -399,10 +399,6 @@ class ThermalFamily(AbstractFamily):
     option_keys = ("smoothing_s", "speed_change_s")
     target_label = "bearing temperature T_bearing [°C]"
 
-    def __init__(self, **options: Any):
-        super().__init__(**options)
-        self._absent: set[str] = set()
-
     def prepare(self, record: Record, name: str) -> Experiment:
         n = len(record)
         if n < 16:
@@ -420,7 +416,6 @@ class ThermalFamily(AbstractFamily):
         arrays: dict[str, np.ndarray] = {}
         for key in _INPUTS:
             if key not in record.names:
-                self._absent.add(key)
                 arrays[key] = np.zeros(n)
                 continue
             x = np.asarray(record[key], float)
@@ -475,7 +470,7 @@ class ThermalFamily(AbstractFamily):
     def describe_nominal(self) -> str:
         return (
             "static linear regression on bias-free inputs, T_bearing = c0 + c1·(T_chassis − min)"
-            + ("" if "v_m" in self._absent else " + c2·(v_m − min)")
+            + " [+ c2·(v_m − min) when the spindle speed v_m is recorded]"
             + " (study eq. 2-3)"
         )
 
@@ -487,7 +482,7 @@ class ThermalFamily(AbstractFamily):
                 "is not identifiable; give experiments in which the spindle warms up or cools "
                 "down"
             )
-        use_speed = "v_m" not in self._absent
+        use_speed = all("v_m" in e.signals for e in experiments)
         v = np.concatenate([e.arrays["v_m"] for e in experiments])
         if use_speed and float(np.ptp(v)) <= 0:
             use_speed = False

@@ -772,14 +772,13 @@ class TMFFamily(AbstractFamily):
     early_layout = True
 
     def __init__(self, **options: Any):
-        super().__init__(**options)
-        order = self.options.get("order", 4)
+        order = options.get("order", 4)
         if isinstance(order, bool) or not isinstance(order, int | np.integer) or order < 1:
             raise ValueError(
                 f"diagnose(tmf): order must be a positive integer (numerator and denominator "
                 f"order of the TMF); got {order!r}."
             )
-        self.options["order"] = int(order)
+        super().__init__(**{**options, "order": int(order)})
 
     def prepare(self, record: Record, name: str) -> Experiment:
         order = self.options["order"]
