@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.integrate as si
+from benchmark_module import load_benchmark
 
 from jaxvs.calibration import backward_elimination, log_evidence, stability_selection
 from jaxvs.data import Record, split_blocks
@@ -312,50 +313,12 @@ DT_TH = 10.0
 SMAX = 12000.0
 
 
-def _speed(t):
-    """Speed levels [rpm], 1.5 h each, reached by 5-minute ramps: every level of the
-    validation block also occurs (or lies between levels) in the calibration block."""
-    levels = np.array([6000, 6000, 12000, 3000, 9000, 0, 12000, 4500, 7500], float)
-    k = np.minimum((t // 5400).astype(int), levels.size - 2)
-    ramp = np.clip((t - 5400 * k) / 300.0, 0.0, 1.0)
-    return levels[k] + ramp * (levels[k + 1] - levels[k])
-
-
-def _thermal_plant(heat=None, sensor=None, n=4320, noise=0.02, seed=0) -> Record:
-    """A spindle written here as a two-node network integrated by `solve_ivp`: the chassis
-    follows the air and the motor's heat (`τ = 40 min`), the bearing's static temperature
-    is `2 + T_chassis + 6·s/12000` and it lags it by `τ = 10 min`. `heat(t, s)` [K] is an
-    extra heat flow into the bearing node (in kelvin of its static rise), `sensor(t)` [K]
-    an extra term of the bearing sensor. 12 h at 10 s, white noise on the sensors."""
-    rng = np.random.default_rng(seed)
-    heat = heat or (lambda t, s: 0.0)
-    sensor = sensor or (lambda t: 0.0)
-
-    def air(t):
-        return 20.0 + 1.0 * np.sin(2 * np.pi * t / 14400.0 + 0.3)
-
-    def rhs(t, x):
-        s = _speed(np.array([t]))[0]
-        tc, tb = x
-        static = 2.0 + tc + 6.0 * s / SMAX + heat(t, s)
-        return [(air(t) + 8.0 * s / SMAX - tc) / 2400.0, (static - tb) / 600.0]
-
-    t = np.arange(n) * DT_TH
-    s0 = _speed(np.zeros(1))[0]
-    tc0 = air(0.0) + 8.0 * s0 / SMAX
-    x0 = [tc0, 2.0 + tc0 + 6.0 * s0 / SMAX + heat(0.0, s0)]
-    sol = si.solve_ivp(rhs, (0, t[-1]), x0, t_eval=t, rtol=1e-9, atol=1e-9, max_step=DT_TH)
-    tc, tb = sol.y
-    tb = tb + np.array([sensor(x) for x in t])
-    return Record(
-        {
-            "T_chassis": tc + noise * rng.normal(size=n),
-            "T_bearing": tb + noise * rng.normal(size=n),
-            "v_m": _speed(t),
-            "T_air": air(t) + noise * rng.normal(size=n),
-        },
-        dt=DT_TH,
-    )
+# the plant of the discovery benchmark (one copy): a spindle written as a two-node network
+# integrated by `solve_ivp`, the chassis following the air and the motor's heat (40 min),
+# the bearing's static temperature `2 + T_chassis + 6·s/12000` lagging it by 10 min;
+# `heat(t, s)` [K] is an extra heat flow into the bearing node, `sensor(t)` [K] an extra
+# term of the bearing sensor; 12 h at 10 s, white noise on the sensors
+_thermal_plant = load_benchmark("discovery").thermal_plant
 
 
 def _discover_thermal(record, **kw) -> Discovered:
