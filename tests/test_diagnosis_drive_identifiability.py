@@ -30,7 +30,8 @@ def _gates(rec, **options):
     exp = fam.prepare(rec, "record")
     nominal = fam.nominal([exp])
     why = fam.identifiability([exp], GapModel(nominal))
-    return jaxvs.check(rec, family="drive", **options), fam, nominal, why
+    warnings = fam.nominal_warnings([exp])
+    return jaxvs.check(rec, family="drive", **options), warnings, nominal, why
 
 
 def out_and_back(n=4000, fs=1000.0, seed=0):
@@ -70,17 +71,17 @@ def test_one_reversal_suffices():
 
 def test_an_unexcited_mass_is_fixed_with_a_warning_not_refused():
     rec = friction_rig()
-    check, fam, nominal, why = _gates(rec)
+    check, warnings, nominal, why = _gates(rec)
     assert why is None and check.ok, check.content["blocking"]
     assert isinstance(nominal.M, float) and nominal.M == 0.0  # fixed: no calibrated leaf
     # the remaining parameters are the least-squares fit without the inertia
-    exp = fam.prepare(rec, "rig")
+    exp = DriveFamily().prepare(rec, "rig")
     phi = np.stack([exp.arrays["v"], np.ones(exp.n)], -1)
     (fv, off), *_ = np.linalg.lstsq(phi, exp.y, rcond=None)
     assert float(nominal.Fv) == pytest.approx(fv, rel=1e-9)
     assert float(nominal.offset) == pytest.approx(off, rel=1e-6, abs=1e-9)
     # the same warning in `jaxvs check` and in what the diagnosis reports (its check)
-    (warning,) = fam.nominal_warnings
+    (warning,) = warnings
     assert "the inertia is not excited" in warning and "fixed at 0 kg" in warning
     assert warning in check.content["warnings"]
     assert "mass" in check.to_markdown()
@@ -89,12 +90,12 @@ def test_an_unexcited_mass_is_fixed_with_a_warning_not_refused():
 
 
 def test_a_stated_mass_is_used_when_the_record_does_not_excite_it():
-    _, fam, nominal, why = _gates(friction_rig(), mass=12.5)
+    _, warnings, nominal, why = _gates(friction_rig(), mass=12.5)
     assert why is None and nominal.M == 12.5
-    assert "fixed at 12.5 kg (the mass option)" in fam.nominal_warnings[0]
+    assert "fixed at 12.5 kg (the mass option)" in warnings[0]
     # an excited mass is calibrated, the option is not used
-    _, fam, nominal, _ = _gates(out_and_back(), mass=12.5)
-    assert not isinstance(nominal.M, float) and not fam.nominal_warnings
+    _, warnings, nominal, _ = _gates(out_and_back(), mass=12.5)
+    assert not isinstance(nominal.M, float) and not warnings
 
 
 def test_mass_excitation_oracle():
@@ -123,5 +124,5 @@ def test_a_rank_deficient_jacobian_names_the_parameter_and_what_to_record():
 def test_still_and_one_way_records_are_still_refused():
     n = 3000
     ramp = Record({"q": 0.01 * np.arange(n) / 1000.0, "u": np.full(n, 30.0)}, dt=1e-3)
-    check, fam, nominal, why = _gates(ramp)
+    check, _, nominal, why = _gates(ramp)
     assert why is not None and "one direction" in why and not check.ok

@@ -224,5 +224,5 @@ def test_a_position_force_does_not_make_the_mass_unidentifiable():
     # fixed at zero with a warning, and the record is not refused
     flat = fam.prepare(Record({"q": q, "u": 10 + rng.standard_normal(n)}, dt=1 / fs), "flat")
     nominal = fam.nominal([flat])
-    assert nominal.M == 0.0 and "mass is fixed" in fam.nominal_warnings[0]
+    assert nominal.M == 0.0 and "mass is fixed" in fam.nominal_warnings([flat])[0]
     assert fam.identifiability([flat], GapModel(nominal)) is None

@@ -350,6 +350,11 @@ class AbstractFamily(abc.ABC):
     calibration (the search then compiles one fitting program for the nominal model, the
     null refits and the rounds)."""
     target_label: ClassVar[str] = "target"
+    singular_rtol: ClassVar[float] = 1e-6
+    """The relative singular value of the column-scaled Jacobian of the nominal model below
+    which `jaxvs check` and the diagnosis call a parameter combination unidentifiable."""
+    record_advice: ClassVar[Mapping[str, str]] = {}
+    """What to record so that a nominal parameter becomes identifiable (named in refusals)."""
 
     def __init__(self, **options: Any):
         unknown = sorted(set(options) - set(self.option_keys))
@@ -397,6 +402,11 @@ class AbstractFamily(abc.ABC):
         """`count` effect-free copies of `experiments`: the calibrated model `model`
         simulated through each record's own set-up (sampling, quantisation, noise level,
         loop and preprocessing). Returns `count` lists, each like `experiments`."""
+
+    def nominal_warnings(self, experiments: Sequence[Experiment]) -> tuple[str, ...]:
+        """What the nominal model's start on `experiments` had to fix or bound, in words
+        (e.g. a mass the record does not excite); reported as warnings. None by default."""
+        return ()
 
     def settings(self, experiments: Sequence[Experiment]) -> dict[str, Any]:
         """The options as the analysis of `experiments` used them, with the values it

@@ -45,7 +45,6 @@ CHECK_SCHEMA_VERSION = 1
 meaning)."""
 
 # heuristics, each documented where it is used
-_SINGULAR_RTOL = 1e-6
 _COHERENCE_MIN = 0.5
 
 
@@ -253,7 +252,7 @@ def _parameter_names(nominal: eqx.Module) -> list[str]:
 
 
 def _jacobian_report(
-    nominal: eqx.Module, experiments: Sequence[Any], rtol: float = _SINGULAR_RTOL
+    nominal: eqx.Module, experiments: Sequence[Any], rtol: float = 1e-6
 ) -> dict[str, Any]:
     params, static = eqx.partition(nominal, eqx.is_inexact_array)
     flat, unravel = jax.flatten_util.ravel_pytree(params)
@@ -371,12 +370,10 @@ def check_records(
         # that `jaxvs check` refuses exactly what the diagnosis refuses; parameters the
         # family fixed (a mass a friction rig does not excite) are no Jacobian column,
         # and the fixing is a warning
-        warnings += list(getattr(fam, "nominal_warnings", ()))
-        ident = _jacobian_report(
-            nominal, experiments, getattr(fam, "singular_rtol", _SINGULAR_RTOL)
-        )
+        warnings += list(fam.nominal_warnings(experiments))
+        ident = _jacobian_report(nominal, experiments, fam.singular_rtol)
         content["jacobian"] = ident
-        advice = getattr(fam, "record_advice", {})
+        advice = fam.record_advice
         for combo in ident["unidentifiable"]:
             terms = ", ".join(f"{n} ({w:+.2f})" for n, w in combo["combination"].items())
             worst = max(combo["combination"], key=lambda n: abs(combo["combination"][n]))

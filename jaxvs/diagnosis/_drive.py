@@ -1051,7 +1051,6 @@ class DriveFamily(AbstractFamily):
         "mass",
     )
     target_label = "force u [N]"
-    nominal_warnings: tuple[str, ...] | list[str] = ()  # set by `nominal`
 
     _MODEL_SIGNALS = ("q", "u", "r", "vir", "q_ref", "qg")
 
@@ -1197,6 +1196,12 @@ class DriveFamily(AbstractFamily):
         return "rigid axis M q̈ + Fv q̇ + offset = u (inverse dynamics, force predicted from motion)"
 
     def nominal(self, experiments: Sequence[Experiment]) -> RigidNominal:
+        return self._nominal_start(experiments)[0]
+
+    def nominal_warnings(self, experiments: Sequence[Experiment]) -> tuple[str, ...]:
+        return self._nominal_start(experiments)[1]
+
+    def _nominal_start(self, experiments: Sequence[Experiment]) -> tuple[RigidNominal, tuple]:
         """The rigid axis by linear least squares. A mass the record does not excite
         (`mass_not_excited`) is fixed at the `mass` option (default 0 kg) and a negative
         viscous friction at zero, each with a warning (`nominal_warnings`, reported by
@@ -1206,7 +1211,7 @@ class DriveFamily(AbstractFamily):
         a = np.concatenate([e.arrays["a"] for e in experiments])
         v = np.concatenate([e.arrays["v"] for e in experiments])
         one = np.ones_like(v)
-        self.nominal_warnings: list[str] = []
+        warnings: list[str] = []
         why = mass_not_excited(experiments)
         if why is None:
             th, *_ = np.linalg.lstsq(np.stack([a, v, one], -1), y, rcond=None)
@@ -1221,7 +1226,7 @@ class DriveFamily(AbstractFamily):
             mass = float(mass)
             (fv, off), *_ = np.linalg.lstsq(np.stack([v, one], -1), y - mass * a, rcond=None)
             source = "the mass option" if self.options.get("mass") else "zero"
-            self.nominal_warnings.append(
+            warnings.append(
                 f"the inertia is not excited ({why}): the mass is fixed at {mass:.4g} kg "
                 f"({source}) and the diagnosis goes on with friction and play; give the "
                 "moving mass with the mass option, or record moves with clear accelerations"
@@ -1236,14 +1241,13 @@ class DriveFamily(AbstractFamily):
                 off = th[0]
             else:
                 mass, off = jnp.asarray(th[0]), th[1]
-            self.nominal_warnings.append(
+            warnings.append(
                 f"the least-squares viscous friction is negative (Fv = {fv:.4g} N·s/m): it is "
                 "fixed at 0 N·s/m (a force that falls with speed is left to the friction "
                 "effects)"
             )
-            fv = 0.0
-            return RigidNominal(mass, 0.0, jnp.asarray(off))
-        return RigidNominal(mass, jnp.asarray(fv), jnp.asarray(off))
+            return RigidNominal(mass, 0.0, jnp.asarray(off)), tuple(warnings)
+        return RigidNominal(mass, jnp.asarray(fv), jnp.asarray(off)), tuple(warnings)
 
     def library(self) -> list[EffectSpec]:
         return [
