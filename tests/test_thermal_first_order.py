@@ -40,7 +40,7 @@ def test_first_order_closed_form_and_gradient():
 
 @pytest.mark.parametrize("row", range(5))
 def test_table3_recovered_from_90s_samples(row):
-    """Issue 4 check: samples every 90 s with 0.1 K noise; k, T0 within 2 %, T1 within 8 %."""
+    """The study's check: samples every 90 s with 0.1 K noise; k, T0 within 2 %, T1 within 8 %."""
     k, T0, T1 = TABLE3[row]
     rng = np.random.default_rng(row)
     t = np.arange(0.0, 1800.0, 90.0)

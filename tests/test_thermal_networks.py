@@ -267,7 +267,7 @@ def test_float32_gram_trains_like_float64():
 
 @pytest.mark.slow
 def test_joint_calibration_of_interpolation_and_tdnn():
-    """Issue 4 item 7: per-part laws and TDNN weights in one jaxvs.calibrate problem."""
+    """Per-part laws and TDNN weights in one jaxvs.calibrate problem."""
     import warnings
 
     import jaxvs
