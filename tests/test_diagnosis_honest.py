@@ -316,14 +316,12 @@ def test_null_rejects_a_pipeline_artefact_on_effect_free_closed_loop_data():
     assert g["validation"] > 2 * g["noise_floor_white"]  # not white noise
     # the null floor is the gap of an adequate model: within 25 % (record-to-record spread)
     assert g["noise_floor"] == pytest.approx(g["validation"], rel=0.25)
-    nulled = {c["effect"]: c for c in rep.candidates if c["null_p95"] is not None}
-    # the flexible resonance fits part of the artefact (admissible, significant on the
-    # held-out record, ΔBIC in the thousands) and only the null stops it
-    assert "resonance" in nulled and nulled["resonance"]["delta_bic"] > 100
-    for c in nulled.values():
-        assert "null" in c["rejected_by"]
-        assert c["validation_gap_before"] - c["validation_gap"] <= c["null_threshold"]
-        assert c["null_threshold"] >= c["null_p95"]
+    # the nominal gap lies within the null, so no candidate is tried at all: the one
+    # omnibus test protects the many candidate tests (a flexible resonance used to fit
+    # part of the artefact, significant on the held-out record, and only the candidate's
+    # own null stopped it)
+    assert rep.verdict["status"] == "adequate" and rep.verdict["searched"] is False
+    assert rep["rounds"] == []
     for c in rep.candidates:
         assert not c["accepted"]
         if c["admissible"] is False:

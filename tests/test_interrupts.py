@@ -115,9 +115,12 @@ def files(tmp_path_factory) -> Path:
     from jaxvs.twins import DriveTwin
 
     d = tmp_path_factory.mktemp("interrupts")
-    # a drive twin's records: identifiable, so `diagnose` runs for a minute, not seconds
-    save_csv(DriveTwin().experiment(jr.key(0), duration=6.0), d / "cal.csv")
-    save_csv(DriveTwin().experiment(jr.key(1), duration=3.0), d / "val.csv")
+    # a drive twin's records with hidden friction: identifiable and above the null, so
+    # `diagnose` searches the library for a minute, not seconds (an effect-free record
+    # within the null is adequate at once: no candidate is tried)
+    twin = DriveTwin(effects={"lugre": dict(Fc=20.0)})
+    save_csv(twin.experiment(jr.key(0), duration=6.0), d / "cal.csv")
+    save_csv(twin.experiment(jr.key(1), duration=3.0), d / "val.csv")
     t = np.arange(1500) * 1e-3  # one direction only: not identifiable, reported quickly
     write_csv(d / "ramp.csv", {"t": t, "q": 0.01 * t, "u": 30 + np.sin(40 * t), "r": 0.01 * t})
     write_csv(d / "th.csv", _thermal_columns(600))
