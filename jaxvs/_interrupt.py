@@ -295,8 +295,16 @@ def _discard(state: _State) -> None:
 
 
 def done() -> None:
-    """The command has ended: a Ctrl-C from now on changes nothing (the exit code stands)."""
+    """The command has ended: a Ctrl-C from now on changes nothing (the exit code stands).
+
+    In the command, SIGINT and SIGTERM are then ignored: the interpreter's finalization
+    resets Python-level handlers to the default action, so a signal arriving while JAX
+    and its threads shut down would otherwise kill the finished command (exit -2) after
+    its report was written. An ignored signal is not reset."""
     _state.finished = True
+    if _state.installed and _is_command() and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 def was_interrupted() -> bool:
