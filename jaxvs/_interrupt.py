@@ -213,14 +213,20 @@ def stage(text: str) -> None:
     """What the command is doing now (goes into the interrupt line); also appended to the
     file named by `JAXVS_TRACE_STAGES`, which the interrupt tests use to pick a moment."""
     _state.stage = text
-    trace = os.environ.get("JAXVS_TRACE_STAGES")
-    if trace:
-        with open(trace, "a", encoding="utf-8") as f:
-            f.write(text + "\n")
+    if _trace(text):
         pause = os.environ.get("JAXVS_STAGE_PAUSE", "")  # "STAGE_PREFIX:SECONDS"
         prefix, _, seconds = pause.rpartition(":")
         if prefix and text.startswith(prefix):
             time.sleep(float(seconds))
+
+
+def _trace(text: str) -> bool:
+    """Append `text` to the file named by `JAXVS_TRACE_STAGES`; whether there is one."""
+    trace = os.environ.get("JAXVS_TRACE_STAGES")
+    if trace:
+        with open(trace, "a", encoding="utf-8") as f:
+            f.write(text + "\n")
+    return bool(trace)
 
 
 def set_grace(seconds: float) -> None:
@@ -302,6 +308,7 @@ def done() -> None:
     and its threads shut down would otherwise kill the finished command (exit -2) after
     its report was written. An ignored signal is not reset."""
     _state.finished = True
+    _trace("ended")
     if _state.installed and _is_command() and threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
