@@ -19,6 +19,7 @@ excite the inertia: the mass is fixed and the diagnosis goes on).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import pathlib
@@ -31,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._html import markdown_to_html, report_html
+from .._json_section import JsonSection, section_json
 from .._misc import json_safe, require_x64
 from ..data import Record, signal_quality
 from ._base import GapModel, NotIdentifiable, unwrap
@@ -38,7 +40,14 @@ from ._families import FAMILIES
 from ._inputs import CHECK_VALUES, check_signals, memory_check, records
 from ._options import validate_options
 
-__all__ = ["CHECK_SCHEMA_VERSION", "CheckReport", "check"]
+__all__ = [
+    "CHECK_SCHEMA_VERSION",
+    "CheckContent",
+    "CheckReport",
+    "Jacobian",
+    "Unidentifiable",
+    "check",
+]
 
 CHECK_SCHEMA_VERSION = 1
 """`schema_version` of the check's `report.json` (raised when a key is removed or changes
@@ -48,25 +57,151 @@ meaning)."""
 _COHERENCE_MIN = 0.5
 
 
-class CheckReport:
-    """What `jaxvs.check` found: `content` (the JSON-ready dict), `ok`, `to_markdown`,
-    `to_html`, `save(folder)` (writes `report.json`, `report.md` and `report.html`)."""
+@dataclasses.dataclass(frozen=True)
+class Unidentifiable(JsonSection):
+    """A parameter combination the records cannot identify: its singular value relative
+    to the largest and the combination (parameter -> weight, the largest weight 1)."""
 
-    def __init__(self, content: dict[str, Any]):
-        self.content = content
-        # the prepared experiments and the nominal model's initial fit, when the check got
-        # that far (`jaxvs.diagnose` goes on from them instead of preparing them again)
-        self.experiments: list[Any] | None = None
-        self.nominal_model: Any = None
+    relative: float
+    combination: dict[str, float]
+
+    def _json(self) -> dict[str, Any]:
+        return {"relative": self.relative, "combination": dict(self.combination)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Unidentifiable:
+        return cls(relative=_float(data["relative"]), combination=dict(data["combination"]))
+
+
+@dataclasses.dataclass(frozen=True)
+class Jacobian(JsonSection):
+    """The singular values of the nominal model's column-scaled Jacobian on the records:
+    the parameter names (one per column), the singular values (largest first), the
+    condition number (infinite for a singular Jacobian) and the combinations below the
+    threshold."""
+
+    parameters: list[str]
+    singular_values: list[float]
+    condition: float
+    unidentifiable: list[Unidentifiable] = dataclasses.field(default_factory=list)
+
+    def _json(self) -> dict[str, Any]:
+        return {
+            "parameters": list(self.parameters),
+            "singular_values": list(self.singular_values),
+            "condition": self.condition,
+            "unidentifiable": [u._json() for u in self.unidentifiable],
+        }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Jacobian:
+        return cls(
+            parameters=list(data["parameters"]),
+            singular_values=[_float(v) for v in data["singular_values"]],
+            # `report.json` writes an infinite condition number as null
+            condition=_float(data["condition"], math.inf),
+            unidentifiable=[Unidentifiable.from_json(u) for u in data.get("unidentifiable", [])],
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class CheckContent(JsonSection):
+    """The content of the check's `report.json`, typed: `family`, `nominal` (the nominal
+    model in words), `records` (per record: `name`, `samples`, `fs`, `duration`,
+    `signals` (clipping share and quantisation step per signal) and, where measured,
+    `excitation_band_hz`, `median_coherence_in_band`, `share_moving_positive`,
+    `reversals`), `blocking`, `warnings`, `jacobian` (a `Jacobian`, `None` when the
+    nominal model could not be fitted) and `identifiable`.
+
+    `to_json()` writes `report.json` (with `schema_version`); `from_json` reads it back.
+    """
+
+    family: str
+    nominal: str = ""
+    records: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    blocking: list[str] = dataclasses.field(default_factory=list)
+    warnings: list[str] = dataclasses.field(default_factory=list)
+    jacobian: Jacobian | None = None
+    identifiable: bool = False
+
+    def _json(self) -> dict[str, Any]:
+        return {
+            "family": self.family,
+            "nominal": self.nominal,
+            "records": list(self.records),
+            "blocking": list(self.blocking),
+            "warnings": list(self.warnings),
+            "jacobian": section_json(self.jacobian),
+            "identifiable": self.identifiable,
+        }
 
     def to_json(self) -> dict[str, Any]:
         """`report.json`: the content with its `schema_version`, JSON-ready."""
-        return {"schema_version": CHECK_SCHEMA_VERSION, **json_safe(self.content)}
+        return {"schema_version": CHECK_SCHEMA_VERSION, **json_safe(self._json())}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> CheckContent:
+        """The content of a check's `report.json` (or of the `check` section of a
+        diagnosis report)."""
+        _check_schema(data, CHECK_SCHEMA_VERSION, "check")
+        jac = data.get("jacobian")
+        return cls(
+            family=data["family"],
+            nominal=data.get("nominal", ""),
+            records=list(data.get("records", [])),
+            blocking=list(data.get("blocking", [])),
+            warnings=list(data.get("warnings", [])),
+            jacobian=None if jac is None else Jacobian.from_json(jac),
+            identifiable=bool(data.get("identifiable", False)),
+        )
+
+
+def _float(value: Any, missing: float = math.nan) -> float:
+    """A float read back from `report.json`, where non-finite ones are written as null."""
+    return missing if value is None else float(value)
+
+
+def _check_schema(data: Mapping[str, Any], version: int, what: str) -> None:
+    written = data.get("schema_version", version)
+    if not isinstance(written, int) or written > version:
+        raise ValueError(
+            f"this {what} report.json has schema_version {written!r}, newer than the "
+            f"{version} this version of jaxvs reads; upgrade jaxvs to read it."
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class CheckReport:
+    """What `jaxvs.check` found: `content` (a `CheckContent`, the typed `report.json`),
+    `ok`, `to_json`, `to_markdown`, `to_html`, `save(folder)` (writes `report.json`,
+    `report.md` and `report.html`), and, when the check got that far, the prepared
+    `experiments` and the nominal model's initial fit `nominal_model` (`jaxvs.diagnose`
+    goes on from them instead of preparing them again).
+
+    `CheckReport(content)` also takes the content as a dictionary (`report.json`'s),
+    and `content["key"]` reads it like one (compatibility)."""
+
+    content: CheckContent
+    experiments: list[Any] | None = dataclasses.field(default=None, repr=False, compare=False)
+    nominal_model: Any = dataclasses.field(default=None, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.content, CheckContent):
+            object.__setattr__(self, "content", CheckContent.from_json(self.content))
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> CheckReport:
+        """A check report read back from its `report.json` (no experiments or model)."""
+        return cls(CheckContent.from_json(data))
+
+    def to_json(self) -> dict[str, Any]:
+        """`report.json`: the content with its `schema_version`, JSON-ready."""
+        return self.content.to_json()
 
     @property
     def ok(self) -> bool:
         """Whether the records can support the family's nominal model (exit code 0)."""
-        return bool(self.content["identifiable"])
+        return bool(self.content.identifiable)
 
     @property
     def exit_code(self) -> int:
@@ -76,22 +211,22 @@ class CheckReport:
         c = self.content
         verdict = "can" if self.ok else "**cannot**"
         lines = [
-            f"# jaxvs check — {c['family']}",
+            f"# jaxvs check — {c.family}",
             "",
-            f"The records {verdict} support the nominal model ({c['nominal']}).",
+            f"The records {verdict} support the nominal model ({c.nominal}).",
             "",
         ]
-        if c["blocking"]:
-            lines += ["## Blocking", ""] + [f"- {b}" for b in c["blocking"]] + [""]
-        if c["warnings"]:
-            lines += ["## Warnings", ""] + [f"- {w}" for w in c["warnings"]] + [""]
+        if c.blocking:
+            lines += ["## Blocking", ""] + [f"- {b}" for b in c.blocking] + [""]
+        if c.warnings:
+            lines += ["## Warnings", ""] + [f"- {w}" for w in c.warnings] + [""]
         lines += [
             "## Records",
             "",
             "| record | samples | fs [Hz] | duration [s] | excitation band [Hz] |",
             "|---|---|---|---|---|",
         ]
-        for r in c["records"]:
+        for r in c.records:
             band = r.get("excitation_band_hz")
             band_text = "—" if band is None else f"{band[0]:.3g}–{band[1]:.3g}"
             lines.append(
@@ -103,31 +238,31 @@ class CheckReport:
             "| record | signal | clipped share | quantisation step / std |",
             "|---|---|---|---|",
         ]
-        for r in c["records"]:
+        for r in c.records:
             for sig, q in r["signals"].items():
                 lines.append(
                     f"| {r['name']} | {sig} | {100 * q['clipped_share']:.2f} % | "
                     f"{_fmt(q['quantisation_step_over_std'])} |"
                 )
-        ident = c.get("jacobian")
+        ident = c.jacobian
         if ident:
             lines += [
                 "",
                 "## Identifiability of the nominal model",
                 "",
                 "Singular values of the column-scaled Jacobian (largest first): "
-                + ", ".join(f"{s:.3g}" for s in ident["singular_values"]),
+                + ", ".join(f"{s:.3g}" for s in ident.singular_values),
                 "",
-                f"Condition number: {_fmt(ident['condition'])}.",
+                f"Condition number: {_fmt(ident.condition)}.",
             ]
-            for combo in ident["unidentifiable"]:
-                terms = " + ".join(f"{w:+.3f}·{n}" for n, w in combo["combination"].items())
-                lines.append(f"- not identifiable: {terms} (σ/σ_max = {combo['relative']:.2g})")
+            for combo in ident.unidentifiable:
+                terms = " + ".join(f"{w:+.3f}·{n}" for n, w in combo.combination.items())
+                lines.append(f"- not identifiable: {terms} (σ/σ_max = {combo.relative:.2g})")
         return "\n".join(lines) + "\n"
 
     def to_html(self) -> str:
         """`report.html`: the Markdown report as one self-contained page."""
-        return report_html(self.to_markdown(), None, f"jaxvs check — {self.content['family']}")
+        return report_html(self.to_markdown(), None, f"jaxvs check — {self.content.family}")
 
     def _repr_html_(self) -> str:
         return markdown_to_html(self.to_markdown())
@@ -142,12 +277,14 @@ class CheckReport:
         return out
 
     def __repr__(self) -> str:
-        return f"CheckReport(family={self.content['family']!r}, ok={self.ok})"
+        return f"CheckReport(family={self.content.family!r}, ok={self.ok})"
 
 
 def _fmt(value: float) -> str:
     """A ratio for the report: "∞" for an infinite one (a constant signal, a singular
-    Jacobian)."""
+    Jacobian), "—" for one `report.json` holds as null."""
+    if value is None:
+        return "—"
     return "∞" if math.isinf(value) else f"{value:.3g}"
 
 
@@ -253,7 +390,7 @@ def _parameter_names(nominal: eqx.Module) -> list[str]:
 
 def _jacobian_report(
     nominal: eqx.Module, experiments: Sequence[Any], rtol: float = 1e-6
-) -> dict[str, Any]:
+) -> Jacobian:
     params, static = eqx.partition(nominal, eqx.is_inexact_array)
     flat, unravel = jax.flatten_util.ravel_pytree(params)
 
@@ -270,19 +407,19 @@ def _jacobian_report(
     _, s, vt = np.linalg.svd(J / scale, full_matrices=False)
     names = _parameter_names(nominal)
     smax = float(s[0]) if s.size else 0.0
-    out = {
-        "parameters": names,
-        "singular_values": [float(v) for v in s],
-        "condition": float(s[0] / s[-1]) if s.size and s[-1] > 0 else math.inf,
-        "unidentifiable": [],
-    }
+    unidentifiable = []
     for k, sv in enumerate(s):
         rel = sv / smax if smax > 0 else 0.0
         if rel < rtol:
             direction = vt[k] / np.max(np.abs(vt[k]))
             combo = {n: float(w) for n, w in zip(names, direction) if abs(w) > 0.05}
-            out["unidentifiable"].append({"relative": float(rel), "combination": combo})
-    return out
+            unidentifiable.append(Unidentifiable(relative=float(rel), combination=combo))
+    return Jacobian(
+        parameters=names,
+        singular_values=[float(v) for v in s],
+        condition=float(s[0] / s[-1]) if s.size and s[-1] > 0 else math.inf,
+        unidentifiable=unidentifiable,
+    )
 
 
 def check(
@@ -345,16 +482,9 @@ def check_records(
             f"the records have different sample rates {sorted(rates)} Hz; they are "
             "calibrated jointly but never resampled — check that this is intended."
         )
-    content: dict[str, Any] = {
-        "family": family,
-        "nominal": fam.describe_nominal() or family,
-        "records": summaries,
-        "blocking": blocking,
-        "warnings": warnings,
-        "jacobian": None,
-    }
     experiments: list[Any] | None = None
     initial = None
+    jacobian: Jacobian | None = None
     try:
         experiments = [fam.prepare(record, name) for record, name in recs]
         initial = fam.nominal(experiments)
@@ -371,20 +501,27 @@ def check_records(
         # family fixed (a mass a friction rig does not excite) are no Jacobian column,
         # and the fixing is a warning
         warnings += list(fam.nominal_warnings(experiments))
-        ident = _jacobian_report(nominal, experiments, fam.singular_rtol)
-        content["jacobian"] = ident
+        jacobian = _jacobian_report(nominal, experiments, fam.singular_rtol)
         advice = fam.record_advice
-        for combo in ident["unidentifiable"]:
-            terms = ", ".join(f"{n} ({w:+.2f})" for n, w in combo["combination"].items())
-            worst = max(combo["combination"], key=lambda n: abs(combo["combination"][n]))
+        for combo in jacobian.unidentifiable:
+            weights = combo.combination
+            terms = ", ".join(f"{n} ({w:+.2f})" for n, w in weights.items())
+            worst = max(weights, key=lambda n: abs(weights[n]))
             todo = f" To identify {worst}: {advice[worst]}." if worst in advice else ""
             blocking.append(
                 f"the nominal model's parameter combination of {terms} is not identifiable "
-                f"from these records (singular value {combo['relative']:.1e} of the "
+                f"from these records (singular value {combo.relative:.1e} of the "
                 f"largest).{todo}"
             )
-    content["identifiable"] = not blocking
-    report = CheckReport(content)
-    if initial is not None:
-        report.experiments, report.nominal_model = experiments, initial
-    return report
+    content = CheckContent(
+        family=family,
+        nominal=fam.describe_nominal() or family,
+        records=summaries,
+        blocking=blocking,
+        warnings=warnings,
+        jacobian=jacobian,
+        identifiable=not blocking,
+    )
+    if initial is None:
+        return CheckReport(content)
+    return CheckReport(content, experiments=experiments, nominal_model=initial)

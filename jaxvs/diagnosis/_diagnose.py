@@ -30,7 +30,16 @@ from ._inputs import (
     records,
 )
 from ._options import validate_options
-from ._report import DiagnosisReport
+from ._report import (
+    DataSummary,
+    DiagnosisContent,
+    DiagnosisReport,
+    ExperimentSize,
+    Gap,
+    Nominal,
+    Timing,
+    Verdict,
+)
 from ._stats import block_length, gap_change_interval, nrmse
 from ._verdict import decide, status_line
 
@@ -43,23 +52,18 @@ def _not_identifiable_report(setup: _Setup, why: str, res, check) -> DiagnosisRe
     """The report of a record that cannot identify the nominal model: no verdict."""
     fam = setup.fam
     names = ", ".join(n for _, n in setup.cal_recs)
-    content = {
-        "check": check,
-        "warnings": (check or {}).get("warnings", []),
-        "family": fam.name,
-        "gap": None,
-        "where": [],
-        "candidates": [],
-        "verdict": None,
-        "not_identifiable": f"{why} (calibration records: {names})",
-        "nominal": {
-            "model": fam.describe_nominal(),
-            "parameters": fam.nominal_parameters(res.nominal) if res is not None else {},
-        },
-        "data": _data_json(setup),
-        "rounds": [],
-        "timing": {"seconds": time.perf_counter() - setup.t_start},
-    }
+    content = DiagnosisContent(
+        family=fam.name,
+        not_identifiable=f"{why} (calibration records: {names})",
+        check=check,
+        warnings=list(check.warnings) if check is not None else [],
+        nominal=Nominal(
+            model=fam.describe_nominal(),
+            parameters=fam.nominal_parameters(res.nominal) if res is not None else {},
+        ),
+        data=_data_json(setup),
+        timing=Timing(seconds=time.perf_counter() - setup.t_start),
+    )
     return DiagnosisReport(content)
 
 
@@ -176,9 +180,9 @@ def diagnose(
         return _not_identifiable_report(setup, res.not_identifiable, res, checked)
     say("mapping the gap")
     report = _report(setup, res, checked, fdr=fdr, n_boot=n_boot, seed=seed)
-    say("done: " + report.content["verdict"]["status_line"])
-    if discover and report.content["verdict"]["status"] in ("unexplained", "partly_explained"):
-        _discover_into(report, fam, n_null=n_null, seed=seed, say=say)
+    say("done: " + report.status_line)
+    if discover and report.status in ("unexplained", "partly_explained"):
+        report = _discover_into(report, fam, n_null=n_null, seed=seed, say=say)
     return report
 
 
@@ -239,8 +243,8 @@ def _prepare(setup: _Setup, say):
     say("checking the calibration data (jaxvs check)")
     check_report = check_records(fam, setup.cal_recs, raise_value_errors=True)
     checked = check_report.content
-    if checked["blocking"]:
-        why = "jaxvs check: " + " ".join(checked["blocking"])
+    if checked.blocking:
+        why = "jaxvs check: " + " ".join(checked.blocking)
         return _not_identifiable_report(setup, why, None, checked)
     n_cal, n_val = len(setup.cal_recs), len(setup.val_recs)
     say(f"preparing {n_cal} calibration and {n_val} validation experiment(s)")
@@ -325,54 +329,53 @@ def _report(setup: _Setup, res, checked, *, fdr: float, n_boot: int, seed: int):
     distortion = nonlinear_distortion(fam.name, exps)
     if distortion.get("finding"):
         state["remainder"]["findings"] = [distortion["finding"]]
-    verdict = {
-        "status": state["status"],
-        "effects": list(res.accepted),
-        "final_effects": list(res.final.effect_names),
-        "primary": res.primary,
-        "validation_gap": g1,
-        "calibration_gap": nrmse(np.concatenate(r1[:ncal]), y_cal),
-        "shrink": shrink,
-        "shrink_interval": list(s_int),
-        "remaining_over_noise": g1 / noise if noise > 0 else None,
-        "adequate": state["adequate"],
-        "remainder": state["remainder"],
-        "searched": not res.gated,
-        "parameters": {
+    verdict = Verdict(
+        status=state["status"],
+        effects=list(res.accepted),
+        final_effects=list(res.final.effect_names),
+        primary=res.primary,
+        validation_gap=g1,
+        calibration_gap=nrmse(np.concatenate(r1[:ncal]), y_cal),
+        shrink=shrink,
+        shrink_interval=list(s_int),
+        remaining_over_noise=g1 / noise if noise > 0 else None,
+        adequate=state["adequate"],
+        remainder=state["remainder"],
+        searched=not res.gated,
+        parameters={
             "nominal": fam.nominal_parameters(res.final),
             **{e.name: e.parameters() for e in res.final.effects},
         },
-    }
-    verdict["status_line"] = status_line(verdict)
-    content = {
-        "family": fam.name,
-        "gap": {
-            "metric": "nrmse",
-            "calibration": nrmse(np.concatenate(r0[:ncal]), y_cal),
-            "validation": g0,
-            "noise_floor": noise,
-            "noise_floor_white": white,
-            "null_gaps": list(res.null_gaps),
-            "target": fam.target_label,
-        },
-        "not_identifiable": None,
-        "distortion": distortion,
-        "check": checked,
-        "warnings": list(checked["warnings"]),
-        "where": where,
-        "where_after": where_after,
-        "candidates": _candidates_json(res),
-        "verdict": verdict,
-        "nominal": {
-            "model": fam.describe_nominal(),
-            "parameters": fam.nominal_parameters(res.nominal),
-        },
-        "data": _data_json(setup, res),
-        "rounds": res.history,
-        "pruning": res.pruning,
-        "timing": {"seconds": time.perf_counter() - setup.t_start},
-        "discovered": None,
-    }
+    )
+    verdict = dataclasses.replace(verdict, status_line=status_line(verdict._json()))
+    content = DiagnosisContent(
+        family=fam.name,
+        gap=Gap(
+            metric="nrmse",
+            calibration=nrmse(np.concatenate(r0[:ncal]), y_cal),
+            validation=g0,
+            noise_floor=noise,
+            noise_floor_white=white,
+            null_gaps=list(res.null_gaps),
+            target=fam.target_label,
+        ),
+        not_identifiable=None,
+        distortion=distortion,
+        check=checked,
+        warnings=list(checked.warnings),
+        where=where,
+        where_after=where_after,
+        candidates=_candidates_json(res),
+        verdict=verdict,
+        nominal=Nominal(
+            model=fam.describe_nominal(), parameters=fam.nominal_parameters(res.nominal)
+        ),
+        data=_data_json(setup, res),
+        rounds=res.history,
+        pruning=res.pruning,
+        timing=Timing(seconds=time.perf_counter() - setup.t_start),
+        discovered=None,
+    )
     return DiagnosisReport(
         content,
         nominal_model=res.nominal,
@@ -387,36 +390,42 @@ def _report(setup: _Setup, res, checked, *, fdr: float, n_boot: int, seed: int):
     )
 
 
-def _data_json(setup: _Setup, res=None) -> dict[str, Any]:
+def _data_json(setup: _Setup, res=None) -> DataSummary:
     """The experiments of the diagnosis (prepared ones when the search ran)."""
     if res is None or not res.calibration:
-        cal = [{"name": n, "samples": len(r)} for r, n in setup.cal_recs]
-        val = [{"name": n, "samples": len(r)} for r, n in setup.val_recs]
+        cal = [ExperimentSize(name=n, samples=len(r)) for r, n in setup.cal_recs]
+        val = [ExperimentSize(name=n, samples=len(r)) for r, n in setup.val_recs]
     else:
-        cal = [{"name": e.name, "samples": e.n} for e in res.calibration]
-        val = [{"name": e.name, "samples": e.n} for e in res.validation]
-    out = {"calibration": cal, "validation": val, "holdout": setup.how}
+        cal = [ExperimentSize(name=e.name, samples=e.n) for e in res.calibration]
+        val = [ExperimentSize(name=e.name, samples=e.n) for e in res.validation]
+    options = None
     if res is not None and res.calibration:
         opts = setup.fam.settings(res.calibration)
-        out["options"] = {k: v for k, v in opts.items() if isinstance(v, int | float | str)}
-    return out
+        options = {k: v for k, v in opts.items() if isinstance(v, int | float | str)}
+    return DataSummary(calibration=cal, validation=val, holdout=setup.how, options=options)
 
 
 def _discover_into(
     report: DiagnosisReport, fam: AbstractFamily, *, n_null: int, seed: int, say: Any
-) -> None:
-    """Discovery after the named search (`report["discovered"]`, `report.discovered`):
-    only for a remainder above the null, and only where the family has a slot."""
+) -> DiagnosisReport:
+    """The report with the discovery after the named search (`report["discovered"]`,
+    `report.discovered`): only for a remainder above the null, and only where the family
+    has a slot."""
     from ._discover import SLOT_FAMILIES, discover
 
     if fam.name not in SLOT_FAMILIES:
-        report.content["discovered"] = {
+        not_run = {
             "fired": False,
             "found": False,
             "message": f"not run: the {fam.name} family has no discovery slot yet",
         }
-        return
+        return dataclasses.replace(
+            report, content=dataclasses.replace(report.content, discovered=not_run)
+        )
     say("discovery: a flexible term in the family's slot, then its formula")
     found = discover(report, family=fam, n_null=n_null, seed=seed, progress=say)
-    report.discovered = found
-    report.content["discovered"] = found.to_json()
+    return dataclasses.replace(
+        report,
+        content=dataclasses.replace(report.content, discovered=found.to_json()),
+        discovered=found,
+    )

@@ -6,17 +6,30 @@ from __future__ import annotations
 import dataclasses
 import json
 import pathlib
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from .._html import markdown_to_html, report_html
+from .._json_section import JsonSection, section_json
 from .._misc import json_safe
 from ._base import Experiment, GapModel
+from ._check import CheckContent
 from ._gapmap import GapCell
 from ._verdict import status_line
 
-__all__ = ["SCHEMA_VERSION", "DiagnosisReport"]
+__all__ = [
+    "SCHEMA_VERSION",
+    "DataSummary",
+    "DiagnosisContent",
+    "DiagnosisReport",
+    "ExperimentSize",
+    "Gap",
+    "Nominal",
+    "Timing",
+    "Verdict",
+]
 
 SCHEMA_VERSION = 2
 """`schema_version` of the diagnosis `report.json`: raised when a key is removed or changes
@@ -24,14 +37,318 @@ meaning (2: `verdict.status`, and `verdict.adequate` true only for that state); 
 leave it unchanged."""
 
 
-@dataclasses.dataclass
-class DiagnosisReport:
-    """The result of `jaxvs.diagnose`: everything `report.json` holds, plus the models,
-    experiments and predictions behind it (for figures and further work).
+def _float(value: Any) -> float | None:
+    """A float read back from `report.json` (non-finite ones are written as null)."""
+    return None if value is None else float(value)
 
-    **Fields (JSON):** `family`, `gap` (`metric`, `calibration`, `validation`,
-    `noise_floor`), `where` (significant gap-map cells, most concentrated first),
-    `candidates` (best first; each with `admissible`, `reason`, `null_p95`,
+
+@dataclasses.dataclass(frozen=True)
+class Gap(JsonSection):
+    """The nominal model's gap: the metric, its value on the calibration and the
+    validation experiments, the noise floor (the gap a perfect model leaves: the
+    measurement noise, and the same from the white-noise estimate alone), the held-out
+    gaps of the effect-free records of the null, and the target signal."""
+
+    metric: str = "nrmse"
+    calibration: float | None = None
+    validation: float | None = None
+    noise_floor: float | None = None
+    noise_floor_white: float | None = None
+    null_gaps: list[float] = dataclasses.field(default_factory=list)
+    target: str | None = None
+
+    def _json(self) -> dict[str, Any]:
+        return {
+            "metric": self.metric,
+            "calibration": self.calibration,
+            "validation": self.validation,
+            "noise_floor": self.noise_floor,
+            "noise_floor_white": self.noise_floor_white,
+            "null_gaps": list(self.null_gaps),
+            "target": self.target,
+        }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Gap:
+        return cls(
+            metric=data.get("metric", "nrmse"),
+            calibration=_float(data.get("calibration")),
+            validation=_float(data.get("validation")),
+            noise_floor=_float(data.get("noise_floor")),
+            noise_floor_white=_float(data.get("noise_floor_white")),
+            null_gaps=list(data.get("null_gaps") or []),
+            target=data.get("target"),
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class Verdict(JsonSection):
+    """What the search concludes: `status` (`adequate`, `explained`,
+    `partly_explained` or `unexplained`; `None` in reports written before the states),
+    the effects accepted in the order added and those of the final model, the `primary`
+    one, the final model's validation and calibration gaps, the `shrink` of the held-out
+    gap with its 95 % bootstrap interval, the remaining gap over the noise floor,
+    `adequate` (true only for `adequate`), the `remainder` against the null (`gap`,
+    `over_floor`, `null_p95`, `within_null`, `where`, ...), `searched` (false when the
+    nominal model's gap already lay within the null and no candidate was tried), the
+    final model's `parameters` (nominal and per effect) and the `status_line`."""
+
+    status: str | None = None
+    effects: list[str] = dataclasses.field(default_factory=list)
+    final_effects: list[str] = dataclasses.field(default_factory=list)
+    primary: str | None = None
+    validation_gap: float | None = None
+    calibration_gap: float | None = None
+    shrink: float | None = None
+    shrink_interval: list[float] = dataclasses.field(default_factory=list)
+    remaining_over_noise: float | None = None
+    adequate: bool | None = None
+    remainder: dict[str, Any] | None = None
+    searched: bool | None = None
+    parameters: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)
+    status_line: str | None = None
+
+    def _json(self) -> dict[str, Any]:
+        return {
+            "status": self.status,
+            "effects": list(self.effects),
+            "final_effects": list(self.final_effects),
+            "primary": self.primary,
+            "validation_gap": self.validation_gap,
+            "calibration_gap": self.calibration_gap,
+            "shrink": self.shrink,
+            "shrink_interval": list(self.shrink_interval),
+            "remaining_over_noise": self.remaining_over_noise,
+            "adequate": self.adequate,
+            "remainder": self.remainder,
+            "searched": self.searched,
+            "parameters": self.parameters,
+            "status_line": self.status_line,
+        }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Verdict:
+        return cls(
+            status=data.get("status"),
+            effects=list(data.get("effects") or []),
+            final_effects=list(data.get("final_effects") or []),
+            primary=data.get("primary"),
+            validation_gap=_float(data.get("validation_gap")),
+            calibration_gap=_float(data.get("calibration_gap")),
+            shrink=_float(data.get("shrink")),
+            shrink_interval=list(data.get("shrink_interval") or []),
+            remaining_over_noise=_float(data.get("remaining_over_noise")),
+            adequate=data.get("adequate"),
+            remainder=data.get("remainder"),
+            searched=data.get("searched"),
+            parameters=dict(data.get("parameters") or {}),
+            status_line=data.get("status_line"),
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class Nominal(JsonSection):
+    """The nominal model in words and its calibrated parameters."""
+
+    model: str
+    parameters: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def _json(self) -> dict[str, Any]:
+        return {"model": self.model, "parameters": self.parameters}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Nominal:
+        return cls(model=data["model"], parameters=dict(data.get("parameters") or {}))
+
+
+@dataclasses.dataclass(frozen=True)
+class ExperimentSize(JsonSection):
+    """An experiment of the diagnosis: its name and its number of samples."""
+
+    name: str
+    samples: int
+
+    def _json(self) -> dict[str, Any]:
+        return {"name": self.name, "samples": self.samples}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> ExperimentSize:
+        return cls(name=data["name"], samples=int(data["samples"]))
+
+
+@dataclasses.dataclass(frozen=True)
+class DataSummary(JsonSection):
+    """The experiments of the diagnosis (prepared ones when the search ran), how the
+    held-out ones were chosen and, when the search ran, the family's settings (`None`
+    otherwise: the key is then left out)."""
+
+    calibration: list[ExperimentSize] = dataclasses.field(default_factory=list)
+    validation: list[ExperimentSize] = dataclasses.field(default_factory=list)
+    holdout: str = ""
+    options: dict[str, int | float | str] | None = None
+
+    def _json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "calibration": [e._json() for e in self.calibration],
+            "validation": [e._json() for e in self.validation],
+            "holdout": self.holdout,
+        }
+        if self.options is not None:
+            out["options"] = dict(self.options)
+        return out
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> DataSummary:
+        opts = data.get("options")
+        return cls(
+            calibration=[ExperimentSize.from_json(e) for e in data.get("calibration", [])],
+            validation=[ExperimentSize.from_json(e) for e in data.get("validation", [])],
+            holdout=data.get("holdout", ""),
+            options=None if opts is None else dict(opts),
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class Timing(JsonSection):
+    """The run time of the diagnosis."""
+
+    seconds: float
+
+    def _json(self) -> dict[str, Any]:
+        return {"seconds": self.seconds}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Timing:
+        return cls(seconds=float(data["seconds"]))
+
+
+_UNSEARCHED_ORDER = ("check", "warnings", "family", "gap", "where", "candidates", "verdict")
+
+
+@dataclasses.dataclass(frozen=True)
+class DiagnosisContent(JsonSection):
+    """The content of the diagnosis `report.json`, typed (docs/guides/contracts.md).
+
+    `to_json()` writes `report.json` (with `schema_version`): `_json()` is the one place
+    its keys are written. `from_json` reads a saved one back. A report without a
+    `verdict` (the records cannot identify the nominal model) ran no search: it has no
+    `distortion`, `where_after`, `pruning` or `discovered` key. `figures` (the figure
+    files of the report folder) is written when set.
+
+    Reads like the dictionary it writes (`content["verdict"]["status"]`), for
+    compatibility; `content["figures"] = names` sets the figures, the one field filled
+    after the report is built (by whoever draws them).
+    """
+
+    family: str
+    gap: Gap | None = None
+    not_identifiable: str | None = None
+    distortion: dict[str, Any] | None = None
+    check: CheckContent | None = None
+    warnings: list[str] = dataclasses.field(default_factory=list)
+    where: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    where_after: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    candidates: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    verdict: Verdict | None = None
+    nominal: Nominal | None = None
+    data: DataSummary | None = None
+    rounds: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    pruning: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    timing: Timing | None = None
+    discovered: dict[str, Any] | None = None
+    figures: list[str] | None = None
+
+    def _json(self) -> dict[str, Any]:
+        searched = self.verdict is not None
+        out: dict[str, Any] = {
+            "family": self.family,
+            "gap": section_json(self.gap),
+            "not_identifiable": self.not_identifiable,
+        }
+        if searched:
+            out["distortion"] = self.distortion
+        out["check"] = section_json(self.check)
+        out["warnings"] = list(self.warnings)
+        out["where"] = list(self.where)
+        if searched:
+            out["where_after"] = list(self.where_after)
+        out["candidates"] = list(self.candidates)
+        out["verdict"] = section_json(self.verdict)
+        out["nominal"] = section_json(self.nominal)
+        out["data"] = section_json(self.data)
+        out["rounds"] = list(self.rounds)
+        if searched:
+            out["pruning"] = list(self.pruning)
+        out["timing"] = section_json(self.timing)
+        if searched:
+            out["discovered"] = self.discovered
+        if self.figures is not None:
+            out["figures"] = list(self.figures)
+        if not searched:  # the key order these reports have always been written in
+            out = {k: out[k] for k in _UNSEARCHED_ORDER if k in out} | out
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        """`report.json`: the content with its `schema_version`, JSON-ready."""
+        return {"schema_version": SCHEMA_VERSION, **json_safe(self._json())}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> DiagnosisContent:
+        """The content of a saved `report.json` (reports of earlier versions too: the
+        keys they lack are read as missing)."""
+        written = data.get("schema_version", SCHEMA_VERSION)
+        if not isinstance(written, int) or written > SCHEMA_VERSION:
+            raise ValueError(
+                f"this diagnosis report.json has schema_version {written!r}, newer than "
+                f"the {SCHEMA_VERSION} this version of jaxvs reads; upgrade jaxvs to read it."
+            )
+
+        def typed(key, kind):
+            value = data.get(key)
+            return None if value is None else kind.from_json(value)
+
+        figures = data.get("figures")
+        return cls(
+            family=data["family"],
+            gap=typed("gap", Gap),
+            not_identifiable=data.get("not_identifiable"),
+            distortion=data.get("distortion"),
+            check=typed("check", CheckContent),
+            warnings=list(data.get("warnings") or []),
+            where=list(data.get("where") or []),
+            where_after=list(data.get("where_after") or []),
+            candidates=list(data.get("candidates") or []),
+            verdict=typed("verdict", Verdict),
+            nominal=typed("nominal", Nominal),
+            data=typed("data", DataSummary),
+            rounds=list(data.get("rounds") or []),
+            pruning=list(data.get("pruning") or []),
+            timing=typed("timing", Timing),
+            discovered=data.get("discovered"),
+            figures=None if figures is None else list(figures),
+        )
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        """`content["figures"] = names`: the figures drawn after the report was built
+        (compatibility; the other fields are frozen)."""
+        if key != "figures":
+            raise TypeError(
+                f"the report's content is frozen: {key!r} cannot be set; build a new one "
+                "with dataclasses.replace(content, ...) (only 'figures' is set after the "
+                "report is built, by whoever draws them)."
+            )
+        object.__setattr__(self, "figures", None if value is None else list(value))
+
+
+@dataclasses.dataclass(frozen=True)
+class DiagnosisReport:
+    """The result of `jaxvs.diagnose`: `content` (a [`DiagnosisContent`][], the typed
+    `report.json`), plus the models, experiments and predictions behind it (for figures
+    and further work).
+
+    **Fields (JSON, `content`):** `family`, `gap` (`metric`, `calibration`,
+    `validation`, `noise_floor`), `where` (significant gap-map cells, most concentrated
+    first), `candidates` (best first; each with `admissible`, `reason`, `null_p95`,
     `null_threshold`, `rejected_by`), `verdict` (`status`: `adequate`, `explained`,
     `partly_explained` or `unexplained`; `status_line`; `effects` in the order added,
     `final_effects`, `primary`, `validation_gap`, `shrink`, `shrink_interval`, `adequate`
@@ -43,77 +360,100 @@ class DiagnosisReport:
     reason, or `None`), `nominal`, `data`, `rounds`, `pruning` (every effect of the final
     model tested against the final model without it: `effect`, `effects`, `gap_without`,
     `gap_with`, `reduction`, `reduction_interval`, `shrink`, `delta_bic`,
-    `null_threshold`, `kept`, `rejected_by`), `timing`. See `to_json()`.
+    `null_threshold`, `kept`, `rejected_by`), `discovered` (the JSON of the discovery),
+    `timing`. `to_json()` writes them; `from_json` reads a saved `report.json` back.
+    The sections are read as attributes (`report.verdict.status`) or, for
+    compatibility, like the dictionaries they write (`report["verdict"]["status"]`,
+    `report.verdict["effects"]`).
 
     **Fields (Python only):** `nominal_model`, `final_model` (`GapModel`s),
     `calibration`, `validation` (`Experiment`s), `predictions` (per experiment, nominal
-    and final), `cells` (the whole gap map), `cells_after`.
+    and final), `cells` (the whole gap map), `discovered` (the `Discovery` of an effect
+    outside the library, when it ran).
+
+    `DiagnosisReport(content)` also takes the content as a dictionary (`report.json`'s).
     """
 
-    content: dict[str, Any]
-    nominal_model: GapModel | None = None
-    final_model: GapModel | None = None
-    calibration: list[Experiment] = dataclasses.field(default_factory=list)
-    validation: list[Experiment] = dataclasses.field(default_factory=list)
-    predictions: dict[str, list[np.ndarray]] = dataclasses.field(default_factory=dict)
-    cells: list[GapCell] = dataclasses.field(default_factory=list)
-    discovered: Any = None
+    content: DiagnosisContent
+    nominal_model: GapModel | None = dataclasses.field(default=None, repr=False, compare=False)
+    final_model: GapModel | None = dataclasses.field(default=None, repr=False, compare=False)
+    calibration: list[Experiment] = dataclasses.field(
+        default_factory=list, repr=False, compare=False
+    )
+    validation: list[Experiment] = dataclasses.field(
+        default_factory=list, repr=False, compare=False
+    )
+    predictions: dict[str, list[np.ndarray]] = dataclasses.field(
+        default_factory=dict, repr=False, compare=False
+    )
+    cells: list[GapCell] = dataclasses.field(default_factory=list, repr=False, compare=False)
+    discovered: Any = dataclasses.field(default=None, repr=False, compare=False)
 
-    # convenient access
+    def __post_init__(self) -> None:
+        if not isinstance(self.content, DiagnosisContent):
+            object.__setattr__(self, "content", DiagnosisContent.from_json(self.content))
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> DiagnosisReport:
+        """A report read back from its `report.json` (the JSON only: no models,
+        experiments or predictions)."""
+        return cls(DiagnosisContent.from_json(data))
+
+    # compatibility: the report reads like the dictionary of `report.json`
     def __getitem__(self, key: str) -> Any:
         return self.content[key]
 
     @property
     def family(self) -> str:
-        return self.content["family"]
+        return self.content.family
 
     @property
-    def gap(self) -> dict[str, Any]:
-        return self.content["gap"]
+    def gap(self) -> Gap | None:
+        return self.content.gap
 
     @property
     def where(self) -> list[dict[str, Any]]:
-        return self.content["where"]
+        return self.content.where
 
     @property
     def candidates(self) -> list[dict[str, Any]]:
-        return self.content["candidates"]
+        return self.content.candidates
 
     @property
-    def verdict(self) -> dict[str, Any]:
-        return self.content["verdict"]
+    def verdict(self) -> Verdict | None:
+        return self.content.verdict
 
     @property
     def status(self) -> str | None:
         """`adequate`, `explained`, `partly_explained`, `unexplained`, or `None` (no
         verdict: the record cannot identify the nominal model)."""
-        v = self.content.get("verdict")
-        return None if v is None else v.get("status")
+        v = self.content.verdict
+        return None if v is None else v.status
 
     @property
     def status_line(self) -> str:
         """The verdict in one line (printed first by the report and the CLI)."""
-        return status_line(self.content.get("verdict"), self.content.get("not_identifiable"))
+        return status_line(section_json(self.content.verdict), self.content.not_identifiable)
 
     def __repr__(self) -> str:
         c = self.content
-        g = c.get("gap") or {}
-        lines = [f"DiagnosisReport(family={c.get('family')!r})", self.status_line]
-        if g:
+        g = c.gap
+        lines = [f"DiagnosisReport(family={c.family!r})", self.status_line]
+        if g is not None:
             lines.append(
-                f"held-out gap {_num(g.get('validation'))} (nominal), noise floor "
-                f"{_num(g.get('noise_floor'))}; report.to_markdown() for the whole report"
+                f"held-out gap {_num(g.validation)} (nominal), noise floor "
+                f"{_num(g.noise_floor)}; report.to_markdown() for the whole report"
             )
         return "\n".join(lines)
 
     def to_json(self) -> dict[str, Any]:
         """The report as a JSON-ready dictionary (the schema of docs/guides/contracts.md),
         with its `schema_version`; the one place `report.json` is written from."""
-        return {"schema_version": SCHEMA_VERSION, **json_safe(self.content)}
+        return self.content.to_json()
 
     def _header(self) -> list[str]:
         """The title, the status line (the verdict first) and the nominal model."""
-        c = self.content
+        c = self.content._json()
         return [
             f"# Sim-to-real gap diagnosis — family `{c['family']}`",
             "",
@@ -124,7 +464,7 @@ class DiagnosisReport:
         ]
 
     def to_markdown(self) -> str:
-        c = self.content
+        c = self.content._json()
         if c.get("not_identifiable"):
             return "\n".join(
                 [
@@ -258,9 +598,9 @@ class DiagnosisReport:
 
     def to_html(self, folder: str | pathlib.Path | None = None) -> str:
         """`report.html`: the Markdown report as one self-contained page, the figures
-        listed in `content["figures"]` embedded from `folder`, each search round
+        listed in `content.figures` embedded from `folder`, each search round
         collapsible."""
-        return report_html(self.to_markdown(), folder, f"jaxvs diagnose — {self.content['family']}")
+        return report_html(self.to_markdown(), folder, f"jaxvs diagnose — {self.content.family}")
 
     def _repr_html_(self) -> str:
         return markdown_to_html(self.to_markdown())

@@ -9,16 +9,17 @@ import os
 import pathlib
 import shutil
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
 from ..._html import markdown_to_html, report_html
 from ..._io import save_model
+from ..._json_section import JsonSection
 from ..._misc import json_safe
 
-__all__ = ["SCHEMA_VERSION", "DesignReport"]
+__all__ = ["SCHEMA_VERSION", "DesignContent", "DesignReport"]
 
 SCHEMA_VERSION = 1
 """`schema_version` of the design `report.json` (raised when a key is removed or changes
@@ -45,44 +46,179 @@ def _describe(d: dict) -> str:
     return f"{d['structure']} ({delays}{extra})"
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(frozen=True)
+class DesignContent(JsonSection):
+    """The content of the design `report.json`, typed (docs/guides/design.md).
+
+    `target`, `metric`, `designs` (ranked, best first: rank, structure, inputs, delays,
+    hidden, validation {rmse, r2, mapd, rmse_interval}, calibration, parameters,
+    seconds, residual checks for the top 25), `best` (the first design, `None` without
+    one), `baseline`, `best_rank_by_structure` and `bootstrap` (when designs were
+    ranked), `not_identifiable` (why no design is suggested, when none is),
+    `candidates_evaluated`, `coverage`, `interrupted`, `input_ranking`,
+    `forward_selection`, `data` (split, sparse-target resampling), `warnings`, `check`,
+    `timing` and `figures` (the figure files, when drawn). A field that is `None` where
+    the list says "when" is left out of the JSON.
+
+    `to_json()` writes `report.json` (with `schema_version`): `_json()` is the one place
+    its keys are written; `from_json` reads a saved one back. Reads like the dictionary
+    it writes (`content["best"]["validation"]`), for compatibility;
+    `content["figures"] = names` sets the figures, the one field filled after the report
+    is built.
+    """
+
+    target: str
+    metric: str = "rmse"
+    designs: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    best: dict[str, Any] | None = None
+    baseline: dict[str, Any] = dataclasses.field(default_factory=dict)
+    best_rank_by_structure: dict[str, int] | None = None
+    bootstrap: dict[str, Any] | None = None
+    not_identifiable: str | None = None
+    candidates_evaluated: int = 0
+    coverage: dict[str, Any] = dataclasses.field(default_factory=dict)
+    interrupted: bool = False
+    input_ranking: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    forward_selection: dict[str, Any] = dataclasses.field(default_factory=dict)
+    data: dict[str, Any] = dataclasses.field(default_factory=dict)
+    warnings: list[str] = dataclasses.field(default_factory=list)
+    check: dict[str, Any] | None = None
+    timing: dict[str, Any] = dataclasses.field(default_factory=dict)
+    figures: list[str] | None = None
+
+    def _json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "target": self.target,
+            "metric": self.metric,
+            "designs": list(self.designs),
+            "best": self.best,
+            "baseline": self.baseline,
+        }
+        if self.best_rank_by_structure is not None:
+            out["best_rank_by_structure"] = self.best_rank_by_structure
+        if self.bootstrap is not None:
+            out["bootstrap"] = self.bootstrap
+        if self.not_identifiable is not None:
+            out["not_identifiable"] = self.not_identifiable
+        out |= {
+            "candidates_evaluated": self.candidates_evaluated,
+            "coverage": self.coverage,
+            "interrupted": self.interrupted,
+            "input_ranking": list(self.input_ranking),
+            "forward_selection": self.forward_selection,
+            "data": self.data,
+            "warnings": list(self.warnings),
+            "check": self.check,
+            "timing": self.timing,
+        }
+        if self.figures is not None:
+            out["figures"] = list(self.figures)
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        """`report.json`: the content with its `schema_version`, JSON-ready."""
+        return {"schema_version": SCHEMA_VERSION, **json_safe(self._json())}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> DesignContent:
+        """The content of a saved `report.json` (or the dictionary a design builds)."""
+        written = data.get("schema_version", SCHEMA_VERSION)
+        if not isinstance(written, int) or written > SCHEMA_VERSION:
+            raise ValueError(
+                f"this design report.json has schema_version {written!r}, newer than the "
+                f"{SCHEMA_VERSION} this version of jaxvs reads; upgrade jaxvs to read it."
+            )
+        figures = data.get("figures")
+        return cls(
+            target=data["target"],
+            metric=data.get("metric", "rmse"),
+            designs=list(data.get("designs") or []),
+            best=data.get("best"),
+            baseline=dict(data.get("baseline") or {}),
+            best_rank_by_structure=data.get("best_rank_by_structure"),
+            bootstrap=data.get("bootstrap"),
+            not_identifiable=data.get("not_identifiable"),
+            candidates_evaluated=int(data.get("candidates_evaluated", 0)),
+            coverage=dict(data.get("coverage") or {}),
+            interrupted=bool(data.get("interrupted", False)),
+            input_ranking=list(data.get("input_ranking") or []),
+            forward_selection=dict(data.get("forward_selection") or {}),
+            data=dict(data.get("data") or {}),
+            warnings=list(data.get("warnings") or []),
+            check=data.get("check"),
+            timing=dict(data.get("timing") or {}),
+            figures=None if figures is None else list(figures),
+        )
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        """`content["figures"] = names`: the figures drawn after the report was built
+        (compatibility; the other fields are frozen)."""
+        if key != "figures":
+            raise TypeError(
+                f"the report's content is frozen: {key!r} cannot be set; build a new one "
+                "with dataclasses.replace(content, ...) (only 'figures' is set after the "
+                "report is built, by whoever draws them)."
+            )
+        object.__setattr__(self, "figures", None if value is None else list(value))
+
+
+@dataclasses.dataclass(frozen=True)
 class DesignReport:
-    """The result of [`jaxvs.design`][]: everything `report.json` holds, plus the best
-    design as a ready virtual sensor and the held-out predictions behind the figures.
+    """The result of [`jaxvs.design`][]: `content` (a `DesignContent`, the typed
+    `report.json`), plus the best design as a ready virtual sensor and the held-out
+    predictions behind the figures.
 
     **Fields (JSON, `content`):** `target`, `metric`, `designs` (ranked, best first: rank,
     structure, inputs, delays, hidden, validation {rmse, r2, mapd, rmse_interval},
     calibration, parameters, seconds, residual checks for the top 25), `best`,
     `baseline`, `candidates_evaluated`, `coverage`, `interrupted`, `input_ranking`,
     `forward_selection`, `data` (split, sparse-target resampling), `warnings`, `timing`.
+    `to_json()` writes them; `from_json` reads a saved `report.json` back;
+    `report["key"]` reads a field like the dictionary of `report.json` (compatibility).
 
     **Fields (Python only):** `best_model` (a `DesignedSensor`, `None` if no design could
     be fitted), `predictions` (rank -> `(time,)` prediction of the top 5 on all samples),
     `arrays` (`t`, `y`, `measured`, `role`, `raw_target`).
+
+    `DesignReport(content=...)` also takes the content as a dictionary.
     """
 
-    content: dict[str, Any]
-    best_model: Any = None
-    predictions: dict[int, np.ndarray] = dataclasses.field(default_factory=dict)
-    arrays: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    content: DesignContent
+    best_model: Any = dataclasses.field(default=None, repr=False, compare=False)
+    predictions: dict[int, np.ndarray] = dataclasses.field(
+        default_factory=dict, repr=False, compare=False
+    )
+    arrays: dict[str, np.ndarray] = dataclasses.field(
+        default_factory=dict, repr=False, compare=False
+    )
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.content, DesignContent):
+            object.__setattr__(self, "content", DesignContent.from_json(self.content))
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> DesignReport:
+        """A report read back from its `report.json` (the JSON only: no model or
+        predictions)."""
+        return cls(DesignContent.from_json(data))
 
     def __getitem__(self, key: str) -> Any:
         return self.content[key]
 
     @property
     def designs(self) -> list[dict]:
-        return self.content["designs"]
+        return self.content.designs
 
     @property
     def best(self) -> dict | None:
-        return self.content["best"]
+        return self.content.best
 
     def to_json(self) -> dict[str, Any]:
         """`report.json`: the content with its `schema_version`, JSON-ready."""
-        return {"schema_version": SCHEMA_VERSION, **json_safe(self.content)}
+        return self.content.to_json()
 
     def to_markdown(self) -> str:
-        c = self.content
+        c = self.content._json()
         lines = [f"# Virtual-sensor design: {c['target']}", ""]
         d = c["data"]
         lines += [
@@ -197,7 +333,7 @@ class DesignReport:
     def to_html(self, folder: pathlib.Path | None = None) -> str:
         """A self-contained HTML page: the markdown report with the figures in `folder`
         embedded."""
-        return report_html(self.to_markdown(), folder, f"jaxvs design: {self.content['target']}")
+        return report_html(self.to_markdown(), folder, f"jaxvs design: {self.content.target}")
 
     def _repr_html_(self) -> str:
         return markdown_to_html(self.to_markdown())
@@ -230,13 +366,13 @@ class DesignReport:
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = pathlib.Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
         try:
-            if figures is not None and self.content["designs"]:
+            if figures is not None and self.content.designs:
                 self.content["figures"] = list(figures(self, tmp))
             if self.best_model is not None:
                 save_model(
                     tmp / "best.eqx",
                     self.best_model,
-                    metadata={"target": self.content["target"], "best": json_safe(self.best)},
+                    metadata={"target": self.content.target, "best": json_safe(self.best)},
                 )
             (tmp / "report.json").write_text(json.dumps(self.to_json(), indent=2) + "\n")
             (tmp / "report.md").write_text(self.to_markdown())
