@@ -342,7 +342,7 @@ class DiagnosisContent(JsonSection):
 
 @dataclasses.dataclass(frozen=True)
 class DiagnosisReport:
-    """The result of `jaxvs.diagnose`: `content` (a [`DiagnosisContent`][], the typed
+    """The result of `jaxvs.diagnose`: `content` (a `DiagnosisContent`, the typed
     `report.json`), plus the models, experiments and predictions behind it (for figures
     and further work).
 
