@@ -85,7 +85,8 @@ def _f(x) -> float:
 
 
 class RigidNominal(eqx.Module):
-    """Nominal rigid axis, `u = M q̈ + Fv q̇ + offset` [N].
+    """Nominal rigid axis, `u = M q̈ + Fv q̇ + offset` [N]: the library's
+    `jaxvs.models.RigidInverseDynamics` on the family's experiment arrays.
 
     `M` is an array when it is calibrated and a Python float when it is fixed (a record
     that does not excite the inertia, e.g. a quasi-static friction rig: `DriveFamily`
@@ -95,9 +96,12 @@ class RigidNominal(eqx.Module):
     Fv: Any  # [N·s/m]: Float[Array, ""] calibrated, float fixed (bounded at zero)
     offset: Float[Array, ""]
 
+    def model(self) -> models.RigidInverseDynamics:
+        """The library model with these parameters."""
+        return models.RigidInverseDynamics(self.M, self.Fv, self.offset)
+
     def __call__(self, d: Mapping[str, Array]) -> Array:
-        # inverse dynamics of the library's rigid axis with viscous friction and offset
-        return self.M * d["a"] + models.ViscousFriction(self.Fv)(d["v"]) + self.offset
+        return self.model().force(d["v"], d["a"])
 
     def parameters(self) -> dict[str, float]:
         return {"M": _f(self.M), "Fv": _f(self.Fv), "offset": _f(self.offset)}

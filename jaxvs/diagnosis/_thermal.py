@@ -37,7 +37,6 @@ from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.signal as ss
@@ -114,33 +113,10 @@ def _positive(x) -> Positive:
 def first_order_lag(
     s: Float[Array, " n"], tau: Float[Array, ""], dt: float, y_init: Float[Array, ""] | None = None
 ) -> Float[Array, " n"]:
-    """First-order lag `τ ẏ + y = s` of a sampled signal.
-
-    Exact discretisation for `s` linear between samples (first-order hold):
-    `y_k = a y_{k−1} + (1 − a) s_{k−1} + (1 − b)(s_k − s_{k−1})`, `a = e^{−dt/τ}`,
-    `b = (τ/dt)(1 − a)` (the ramp response of a first-order system). The state one sample
-    before the first is `y_init` (default: `s₀`, equilibrium), with the input constant over
-    that sample, so `y₀ = a·y_init + (1 − a)·s₀`. For `τ = 0` this is `y = s` exactly; as
-    `τ → 0` it tends to it continuously (`y_k ≈ s_k − (τ/dt)(s_k − s_{k−1})`).
-
-    **Arguments:** `s` [any unit], `tau` [s] (≥ 0), `dt` [s], `y_init` [unit of `s`].
-    **Returns:** `y`, same unit.
-    """
-    pos = tau > 0
-    tau_safe = jnp.where(pos, tau, 1.0)
-    r = dt / tau_safe
-    a = jnp.where(pos, jnp.exp(-r), 0.0)
-    b = jnp.where(pos, -jnp.expm1(-r) / r, 0.0)
-    ds = jnp.diff(s, prepend=s[:1])
-
-    def step(y_prev, x):
-        sk, dsk = x
-        y = a * y_prev + (1.0 - a) * (sk - dsk) + (1.0 - b) * dsk
-        return y, y
-
-    y0 = s[0] if y_init is None else y_init
-    _, y = jax.lax.scan(step, y0, (s, ds))
-    return jnp.where(pos, y, s)
+    """First-order lag `τ ẏ + y = s` of a sampled signal, first-order hold: the library's
+    `jaxvs.models.FirstOrderLag` (`tau` [s] >= 0, the state `y_init` one sample before
+    the first, default `s₀`; `τ = 0` is the identity)."""
+    return models.FirstOrderLag(tau, y_init).predict(s, dt)
 
 
 class Dynamics(AbstractEffect):
