@@ -69,21 +69,51 @@ def _f(x) -> float:
     return float(np.asarray(x).reshape(-1)[0])
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class Biases:
+    """The study's input biases (eq. 2-3): each input's minimum over the calibration data,
+    `T_chassis` [°C] and `v_m` [rpm] (0 without the speed term).
+
+    A report-only value of `StaticRegression`: the prediction has them folded into its
+    intercept, so every `Biases` compares equal and hashes alike, and a model carrying the
+    biases of one data set keeps the structure (and the compiled programs) of every
+    other."""
+
+    T_chassis: float = 0.0
+    v_m: float = 0.0
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Biases)
+
+    def __hash__(self) -> int:
+        return hash(Biases)
+
+
+def _biases(experiments: Sequence[Experiment], use_speed: bool) -> Biases:
+    """The study's biases of the calibration experiments: each input's minimum."""
+    tc = min(float(np.min(e.arrays["T_chassis"])) for e in experiments)
+    vm = min(float(np.min(e.arrays["v_m"])) for e in experiments) if use_speed else 0.0
+    return Biases(tc, vm)
+
+
 class StaticRegression(eqx.Module):
     """The study's static regression (eq. 2-3), `T_bearing` [°C], with the biases folded
-    into the intercept: `T_bearing = c0' + c1·T_chassis [+ c2·v_m]`.
+    into the intercept: `T_bearing = c0' + c1·T_chassis [+ c2·v_m]`, the library's
+    `jaxvs.models.BiasFreeRegression` on the experiment arrays.
 
     The study's form on bias-free inputs, `c0 + c1·(T_chassis − b_c) + c2·(v_m − b_v)`, is
     the same function with `c0 = c0' + c1·b_c + c2·b_v`; [`ThermalFamily`][] reports it that
-    way with the biases of its calibration data. Keeping the biases out of the model keeps
-    its structure independent of the data (one compilation for every data set).
+    way with the biases of its calibration data (`biases`, carried for the report only).
+    Keeping the biases out of the prediction keeps its structure independent of the data
+    (one compilation for every data set).
 
     **Fields:** `coef` = `(c0' [°C], c1 [-], c2 [K/rpm])`, or `(c0', c1)` when
-    `use_speed` is false.
+    `use_speed` is false; `biases`, the calibration data's `Biases`.
     """
 
     coef: Float[Array, " k"]
     use_speed: bool = eqx.field(static=True, default=True)
+    biases: Biases = eqx.field(static=True, default=Biases())
 
     def __call__(self, d: Mapping[str, Array]) -> Float[Array, " n"]:
         # the library's regression (biases folded into the intercept, see above)
@@ -463,16 +493,16 @@ class ThermalFamily(AbstractFamily):
         if use_speed and float(np.ptp(v)) <= 0:
             use_speed = False
         # the study's biases: each input's minimum over the calibration data (eq. 2-3)
-        self._bias = {"T_chassis": float(tc.min()), "v_m": float(v.min()) if use_speed else 0.0}
-        cols = [np.ones(tc.size), tc - self._bias["T_chassis"]]
+        bias = _biases(experiments, use_speed)
+        cols = [np.ones(tc.size), tc - bias.T_chassis]
         if use_speed:
-            cols.append(v - self._bias["v_m"])
+            cols.append(v - bias.v_m)
         phi = np.stack(cols, -1)
         y = np.concatenate([e.y for e in experiments])
         th, *_ = np.linalg.lstsq(phi, y, rcond=None)
         # fold the biases into the intercept (see StaticRegression)
-        th[0] -= th[1] * self._bias["T_chassis"] + (th[2] * self._bias["v_m"] if use_speed else 0.0)
-        return StaticRegression(jnp.asarray(th), use_speed)
+        th[0] -= th[1] * bias.T_chassis + (th[2] * bias.v_m if use_speed else 0.0)
+        return StaticRegression(jnp.asarray(th), use_speed, bias)
 
     def identifiability(self, experiments: Sequence[Experiment], model: GapModel) -> str | None:
         """The regression is identified when its regressors are not collinear (the
@@ -534,17 +564,18 @@ class ThermalFamily(AbstractFamily):
 
     def nominal_parameters(self, model) -> dict[str, float]:
         """The regression in the study's bias-free form: `c0`, `c_chassis`, `c_speed` and
-        the biases `bias_chassis` [°C], `bias_speed` [rpm] of the calibration data."""
-        p = unwrap(model.nominal).parameters()
-        bias = getattr(self, "_bias", {"T_chassis": 0.0, "v_m": 0.0})
-        out = {"c0": p["intercept"] + p["c_chassis"] * bias["T_chassis"]}
+        the biases `bias_chassis` [°C], `bias_speed` [rpm] of the calibration data (the
+        ones the nominal model was started on, which it carries)."""
+        nominal = unwrap(model.nominal)
+        p, bias = nominal.parameters(), nominal.biases
+        out = {"c0": p["intercept"] + p["c_chassis"] * bias.T_chassis}
         out["c_chassis"] = p["c_chassis"]
         if "c_speed" in p:
-            out["c0"] += p["c_speed"] * bias["v_m"]
+            out["c0"] += p["c_speed"] * bias.v_m
             out["c_speed"] = p["c_speed"]
-        out["bias_chassis"] = bias["T_chassis"]
+        out["bias_chassis"] = bias.T_chassis
         if "c_speed" in p:
-            out["bias_speed"] = bias["v_m"]
+            out["bias_speed"] = bias.v_m
         return out
 
     def library(self) -> list[EffectSpec]:
