@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..calibration import unwrap
+from ..calibration import Positive, unwrap
 from ..data import Record
 
 __all__ = [
@@ -150,6 +150,18 @@ def check(*rules: tuple[bool, str]) -> Admissible:
         if not bool(ok):
             return False, reason
     return True, None
+
+
+def scalar(x: Any) -> float:
+    """A one-entry parameter (0-d or `(1,)`) as a Python float, for reports and rules."""
+    return float(np.asarray(x).reshape(-1)[0])
+
+
+def floored_positive(x: Any) -> Positive:
+    """A positive shape parameter as a log-parametrised leaf; a value that underflowed
+    to zero (or went negative) in an earlier calibration restarts from a tiny floor."""
+    x = jnp.asarray(x)
+    return Positive(jnp.log(jnp.maximum(x, 1e-12)))
 
 
 def delay_rules(

@@ -43,7 +43,7 @@ import scipy.signal as ss
 from jaxtyping import Array, Float
 
 from .. import models
-from ..calibration import Positive, fixed, unwrap
+from ..calibration import fixed, unwrap
 from ..data import Record
 from ._base import (
     AbstractAdditiveEffect,
@@ -56,17 +56,15 @@ from ._base import (
     GapModel,
     NotIdentifiable,
     check,
+    floored_positive,
     predict,
+    scalar,
 )
 from ._stats import ar1_draws, ar1_noise, quantisation_step
 
 __all__ = ["StaticRegression", "ThermalFamily"]
 
 _INPUTS = ("T_chassis", "v_m", "T_air", "T_water")
-
-
-def _f(x) -> float:
-    return float(np.asarray(x).reshape(-1)[0])
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -133,13 +131,6 @@ class StaticRegression(eqx.Module):
 # ------------------------------------------------------------------------------ effects
 
 
-def _positive(x) -> Positive:
-    """A positive shape parameter as a log-parametrised leaf; a value that underflowed
-    to zero (or went negative) in an earlier calibration restarts from a tiny floor."""
-    x = jnp.asarray(x)
-    return Positive(jnp.log(jnp.maximum(x, 1e-12)))
-
-
 def first_order_lag(
     s: Float[Array, " n"], tau: Float[Array, ""], dt: float, y_init: Float[Array, ""] | None = None
 ) -> Float[Array, " n"]:
@@ -163,13 +154,13 @@ class Dynamics(AbstractEffect):
         return first_order_lag(y, jnp.asarray(self.tau), self.dt, d["y"][0])
 
     def constrained(self):
-        return eqx.tree_at(lambda e: e.tau, self, replace_fn=_positive)
+        return eqx.tree_at(lambda e: e.tau, self, replace_fn=floored_positive)
 
     def extra_dof(self, arrays):
         return 0
 
     def admissible(self, context):
-        tau = _f(self.tau)
+        tau = scalar(self.tau)
         return check(
             (np.isfinite(tau), "non-finite time constant"),
             (tau >= context.record_dt, f"time constant {tau:.3g} s shorter than one sample"),
@@ -181,7 +172,7 @@ class Dynamics(AbstractEffect):
         )
 
     def parameters(self):
-        return {"tau_s": _f(self.tau)}
+        return {"tau_s": scalar(self.tau)}
 
 
 class _MeasuredTemperature(AbstractAdditiveEffect):
@@ -203,7 +194,7 @@ class _MeasuredTemperature(AbstractAdditiveEffect):
         return 0
 
     def admissible(self, context):
-        c = _f(self.size[0])
+        c = scalar(self.size[0])
         return check(
             (np.isfinite(c), "non-finite coefficient"),
             (
@@ -220,7 +211,7 @@ class _MeasuredTemperature(AbstractAdditiveEffect):
         )
 
     def parameters(self):
-        return {f"c_{self.suffix}": _f(self.size[0]), f"bias_{self.suffix}": _f(self.bias)}
+        return {f"c_{self.suffix}": scalar(self.size[0]), f"bias_{self.suffix}": scalar(self.bias)}
 
 
 class AmbientTemperature(_MeasuredTemperature):
@@ -286,7 +277,7 @@ class SpeedNonlinearity(AbstractAdditiveEffect):
         """Friction heat never falls with speed: with the nominal linear term, the speed
         law `c1·x + c2·x² + c3·x³` (`x = |v|/v_max`) is non-decreasing on [0, 1]."""
         c2, c3 = (float(c) for c in np.asarray(self.size))
-        c1 = float(context.nominal.get("c_speed", 0.0)) * _f(self.scale)
+        c1 = float(context.nominal.get("c_speed", 0.0)) * scalar(self.scale)
         x = np.linspace(0.0, 1.0, 101)
         slope = c1 + 2 * c2 * x + 3 * c3 * x**2
         tol = 1e-9 * (abs(c1) + abs(c2) + abs(c3))
@@ -301,7 +292,7 @@ class SpeedNonlinearity(AbstractAdditiveEffect):
             "c2": c2,
             "c3": c3,
             "alpha_equivalent": equivalent_exponent(c2, c3),
-            "v_max": _f(self.scale),
+            "v_max": scalar(self.scale),
         }
 
 
