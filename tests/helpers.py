@@ -105,6 +105,18 @@ def _regression():
     return ModelCase(m, u, 1.0, lambda m: (m.coef, m.intercept), [])
 
 
+def _first_order_lag():
+    m = jaxvs.models.FirstOrderLag(5.0, 0.5)
+    return ModelCase(m, _prbs(100), 1.0, lambda m: (m.tau,))
+
+
+def _rigid_inverse_dynamics():
+    m = jaxvs.models.RigidInverseDynamics(12.0, 40.0, 3.0)
+    # velocity [m/s] and acceleration [m/s²] of an axis moving both ways
+    u = jnp.stack([0.1 * _prbs(100), 2.0 * _prbs(100, 1)], axis=1)
+    return ModelCase(m, u, 1e-3, lambda m: (m.M, m.Fv, m.offset))
+
+
 def _network(cls, **kw):
     import jax.random as jr
 
@@ -231,6 +243,8 @@ MODELS = [
     ("piecewise_first_order", _piecewise),
     ("driven_first_order", _driven),
     ("bias_free_regression", _regression),
+    ("first_order_lag", _first_order_lag),
+    ("rigid_inverse_dynamics", _rigid_inverse_dynamics),
     ("static_network", lambda: _network(jaxvs.models.StaticNetwork)),
     ("time_delay_network", lambda: _network(jaxvs.models.TimeDelayNetwork)),
     ("virtual_sensor", _virtual_sensor),

@@ -140,6 +140,14 @@ FORBIDDEN = {
         (lambda: M.DrivenFirstOrder(20.0, 0.002, 0.0), r"DrivenFirstOrder: T1 must be > 0 s")
     ],
     "bias_free_regression": [],
+    "first_order_lag": [(lambda: M.FirstOrderLag(-30.0), r"FirstOrderLag: tau must be >= 0 s")],
+    "rigid_inverse_dynamics": [
+        (lambda: M.RigidInverseDynamics(-1.0, 40.0), r"RigidInverseDynamics: M must be >= 0 kg"),
+        (
+            lambda: M.RigidInverseDynamics(12.0, -40.0),
+            r"RigidInverseDynamics: Fv must be >= 0 N·s/m",
+        ),
+    ],
     "static_network": [],
     "time_delay_network": [],
     "virtual_sensor": [],

@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..calibration import unwrap
+from ..calibration import Positive, unwrap
 from ..data import Record
 
 __all__ = [
@@ -150,6 +150,18 @@ def check(*rules: tuple[bool, str]) -> Admissible:
         if not bool(ok):
             return False, reason
     return True, None
+
+
+def scalar(x: Any) -> float:
+    """A one-entry parameter (0-d or `(1,)`) as a Python float, for reports and rules."""
+    return float(np.asarray(x).reshape(-1)[0])
+
+
+def floored_positive(x: Any) -> Positive:
+    """A positive shape parameter as a log-parametrised leaf; a value that underflowed
+    to zero (or went negative) in an earlier calibration restarts from a tiny floor."""
+    x = jnp.asarray(x)
+    return Positive(jnp.log(jnp.maximum(x, 1e-12)))
 
 
 def delay_rules(
@@ -331,7 +343,8 @@ class EffectSpec:
 
 
 class AbstractFamily(abc.ABC):
-    """A model family of the diagnosis (`drive`, `tmf`, `thermal`).
+    """A model family of the diagnosis (`drive`, `tmf`, `thermal`): a frozen
+    configuration (its options, read-only); every method is a function of its arguments.
 
     Besides preprocessing, the nominal model and the library, a family says whether a
     record identifies its nominal model (`identifiability`), what the admissibility rules
@@ -355,6 +368,8 @@ class AbstractFamily(abc.ABC):
     which `jaxvs check` and the diagnosis call a parameter combination unidentifiable."""
     record_advice: ClassVar[Mapping[str, str]] = {}
     """What to record so that a nominal parameter becomes identifiable (named in refusals)."""
+    options: Mapping[str, Any]
+    """The options the family was built with (read-only)."""
 
     def __init__(self, **options: Any):
         unknown = sorted(set(options) - set(self.option_keys))
@@ -364,8 +379,20 @@ class AbstractFamily(abc.ABC):
                 f"{self.name} family takes {list(self.option_keys)}."
             )
         # read-only: what a family derives from the data is returned (`prepare`'s
-        # experiments, `settings`), never written back into its options
-        self.options: Mapping[str, Any] = types.MappingProxyType(dict(options))
+        # experiments, the nominal model, `settings`), never written back into it
+        object.__setattr__(self, "options", types.MappingProxyType(dict(options)))
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError(
+            f"{type(self).__name__} is a frozen configuration: give its options when it is "
+            f"built ({type(self).__name__}(**options)); what it derives from data is "
+            f"returned by its methods, never stored on it (cannot set {name!r})."
+        )
+
+    def __delattr__(self, name: str) -> None:
+        raise AttributeError(
+            f"{type(self).__name__} is a frozen configuration (cannot delete {name!r})."
+        )
 
     @abc.abstractmethod
     def prepare(self, record: Record, name: str) -> Experiment:

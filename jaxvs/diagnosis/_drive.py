@@ -69,6 +69,7 @@ from ._base import (
     check,
     delay_rules,
     fft_delay,
+    scalar,
 )
 from ._stats import (
     difference_noise_sigma,
@@ -80,12 +81,9 @@ from ._stats import (
 __all__ = ["DriveFamily", "RigidNominal"]
 
 
-def _f(x) -> float:
-    return float(np.asarray(x).reshape(-1)[0])
-
-
 class RigidNominal(eqx.Module):
-    """Nominal rigid axis, `u = M q̈ + Fv q̇ + offset` [N].
+    """Nominal rigid axis, `u = M q̈ + Fv q̇ + offset` [N]: the library's
+    `jaxvs.models.RigidInverseDynamics` on the family's experiment arrays.
 
     `M` is an array when it is calibrated and a Python float when it is fixed (a record
     that does not excite the inertia, e.g. a quasi-static friction rig: `DriveFamily`
@@ -95,12 +93,15 @@ class RigidNominal(eqx.Module):
     Fv: Any  # [N·s/m]: Float[Array, ""] calibrated, float fixed (bounded at zero)
     offset: Float[Array, ""]
 
+    def model(self) -> models.RigidInverseDynamics:
+        """The library model with these parameters."""
+        return models.RigidInverseDynamics(self.M, self.Fv, self.offset)
+
     def __call__(self, d: Mapping[str, Array]) -> Array:
-        # inverse dynamics of the library's rigid axis with viscous friction and offset
-        return self.M * d["a"] + models.ViscousFriction(self.Fv)(d["v"]) + self.offset
+        return self.model().force(d["v"], d["a"])
 
     def parameters(self) -> dict[str, float]:
-        return {"M": _f(self.M), "Fv": _f(self.Fv), "offset": _f(self.offset)}
+        return {"M": scalar(self.M), "Fv": scalar(self.Fv), "offset": scalar(self.offset)}
 
 
 # ------------------------------------------------------------------------------ effects
@@ -153,11 +154,11 @@ class CoulombEffect(AbstractEffect):
         return 0
 
     def admissible(self, context):
-        fc = _f(self.size[0])
+        fc = scalar(self.size[0])
         return check((np.isfinite(fc) and fc >= 0, f"negative Coulomb friction Fc = {fc:.4g} N"))
 
     def parameters(self):
-        return {"Fc": _f(self.size[0]), "v_s": _f(self.vs)}
+        return {"Fc": scalar(self.size[0]), "v_s": scalar(self.vs)}
 
 
 class AsymmetricFrictionEffect(AbstractEffect):
@@ -203,7 +204,7 @@ class AsymmetricFrictionEffect(AbstractEffect):
 
     def parameters(self):
         fp, fn, dfv = (float(x) for x in np.asarray(self.size))
-        return {"Fc_pos": fp, "Fc_neg": fn, "dFv": dfv, "v_s": _f(self.vs)}
+        return {"Fc_pos": fp, "Fc_neg": fn, "dFv": dfv, "v_s": scalar(self.vs)}
 
 
 class StribeckEffect(AbstractEffect):
@@ -238,7 +239,7 @@ class StribeckEffect(AbstractEffect):
 
     def admissible(self, context):
         fc, fs = (float(x) for x in np.asarray(self.size))
-        v_st = _f(self.v_st)
+        v_st = scalar(self.v_st)
         return check(
             (_ok(self.size) and np.isfinite(v_st), "non-finite friction parameters"),
             (fc >= 0, f"negative Coulomb level Fc = {fc:.4g} N"),
@@ -247,14 +248,14 @@ class StribeckEffect(AbstractEffect):
                 f"static friction below the Coulomb level (Fs = {fs:.4g} < Fc = {fc:.4g} N)",
             ),
             (
-                v_st > _f(self.vs),
+                v_st > scalar(self.vs),
                 f"Stribeck speed {v_st:.3g} m/s below the sharpness of the sign law",
             ),
         )
 
     def parameters(self):
         fc, fs = (float(x) for x in np.asarray(self.size))
-        return {"Fc": fc, "Fs": fs, "v_stribeck": _f(self.v_st), "v_s": _f(self.vs)}
+        return {"Fc": fc, "Fs": fs, "v_stribeck": scalar(self.v_st), "v_s": scalar(self.vs)}
 
 
 def _play(q: Array, b: Array) -> Array:
@@ -338,7 +339,7 @@ class Backlash(AbstractAdditiveEffect):
 
     def admissible(self, context):
         m, fl = self._sizes()
-        gap = 2 * _f(self.b)
+        gap = 2 * scalar(self.b)
         res = context.resolution
         mass = float(context.nominal.get("M", np.inf))
         coulomb = float(context.nominal.get("coulomb_level", np.inf))
@@ -370,7 +371,7 @@ class Backlash(AbstractAdditiveEffect):
 
     def parameters(self):
         m, fl = self._sizes()
-        return {"gap": 2 * _f(self.b), "m_load": m, "F_load": fl}
+        return {"gap": 2 * scalar(self.b), "m_load": m, "F_load": fl}
 
 
 def _highpass2(x: Array, w: Array, z: Array, dt: float) -> Array:
@@ -417,8 +418,8 @@ class Resonance(AbstractAdditiveEffect):
 
     def admissible(self, context):
         m = float(np.asarray(self.size)[0])
-        f = _f(self.omega) / (2 * math.pi)
-        z = _f(self.zeta)
+        f = scalar(self.omega) / (2 * math.pi)
+        z = scalar(self.zeta)
         lo, hi = context.band_hz
         mass = float(context.nominal.get("M", np.inf))
         return check(
@@ -433,9 +434,9 @@ class Resonance(AbstractAdditiveEffect):
 
     def parameters(self):
         return {
-            "f_r": _f(self.omega) / (2 * math.pi),
-            "zeta": _f(self.zeta),
-            "m_r": _f(self.size[0]),
+            "f_r": scalar(self.omega) / (2 * math.pi),
+            "zeta": scalar(self.zeta),
+            "m_r": scalar(self.size[0]),
             "c_r": float(np.asarray(self.size)[1]),
         }
 
@@ -469,10 +470,10 @@ class TimeDelay(AbstractEffect):
         return 0
 
     def admissible(self, context):
-        return check(*delay_rules(_f(self.tau), context, " (the force cannot act early)"))
+        return check(*delay_rules(scalar(self.tau), context, " (the force cannot act early)"))
 
     def parameters(self):
-        return {"tau": _f(self.tau)}
+        return {"tau": scalar(self.tau)}
 
 
 class PositionForceEffect(AbstractAdditiveEffect):
@@ -506,7 +507,7 @@ class PositionForceEffect(AbstractAdditiveEffect):
         return 0
 
     def admissible(self, context):
-        p = _f(self.pitch)
+        p = scalar(self.pitch)
         return check(
             (_ok(self.size) and np.isfinite(p), "non-finite parameters"),
             (p <= context.span, f"ripple pitch {p:.3g} m longer than the travel"),
@@ -521,7 +522,7 @@ class PositionForceEffect(AbstractAdditiveEffect):
         return {
             "ripple_amplitude": float(np.hypot(s[3], s[4])),
             "ripple_amplitude_2": float(np.hypot(s[5], s[6])),
-            "ripple_pitch": _f(self.pitch),
+            "ripple_pitch": scalar(self.pitch),
             "legendre_1": float(s[0]),
             "legendre_2": float(s[1]),
             "legendre_3": float(s[2]),
@@ -641,7 +642,7 @@ class Saturation(AbstractEffect):
         return float(1.0 - np.interp(limit, levels, shares))
 
     def admissible(self, context):
-        f = _f(self.limit)
+        f = scalar(self.limit)
         umax = float(self.quantiles[1][-1])
         share = self.share_beyond(f) if np.isfinite(f) else 0.0
         return check(
@@ -666,7 +667,7 @@ class Saturation(AbstractEffect):
         )
 
     def parameters(self):
-        f = _f(self.limit)
+        f = scalar(self.limit)
         return {"F_max": f, "share_at_limit": self.share_beyond(f)}
 
 

@@ -37,14 +37,13 @@ from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
 from .. import models
-from ..calibration import Positive, fixed, unwrap
+from ..calibration import fixed, unwrap
 from ..data import Record
 from ._base import (
     AbstractAdditiveEffect,
@@ -57,7 +56,9 @@ from ._base import (
     GapModel,
     NotIdentifiable,
     check,
+    floored_positive,
     predict,
+    scalar,
 )
 from ._stats import ar1_draws, ar1_noise, quantisation_step
 
@@ -66,25 +67,51 @@ __all__ = ["StaticRegression", "ThermalFamily"]
 _INPUTS = ("T_chassis", "v_m", "T_air", "T_water")
 
 
-def _f(x) -> float:
-    return float(np.asarray(x).reshape(-1)[0])
+@dataclasses.dataclass(frozen=True, eq=False)
+class Biases:
+    """The study's input biases (eq. 2-3): each input's minimum over the calibration data,
+    `T_chassis` [°C] and `v_m` [rpm] (0 without the speed term).
+
+    A report-only value of `StaticRegression`: the prediction has them folded into its
+    intercept, so every `Biases` compares equal and hashes alike, and a model carrying the
+    biases of one data set keeps the structure (and the compiled programs) of every
+    other."""
+
+    T_chassis: float = 0.0
+    v_m: float = 0.0
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Biases)
+
+    def __hash__(self) -> int:
+        return hash(Biases)
+
+
+def _biases(experiments: Sequence[Experiment], use_speed: bool) -> Biases:
+    """The study's biases of the calibration experiments: each input's minimum."""
+    tc = min(float(np.min(e.arrays["T_chassis"])) for e in experiments)
+    vm = min(float(np.min(e.arrays["v_m"])) for e in experiments) if use_speed else 0.0
+    return Biases(tc, vm)
 
 
 class StaticRegression(eqx.Module):
     """The study's static regression (eq. 2-3), `T_bearing` [°C], with the biases folded
-    into the intercept: `T_bearing = c0' + c1·T_chassis [+ c2·v_m]`.
+    into the intercept: `T_bearing = c0' + c1·T_chassis [+ c2·v_m]`, the library's
+    `jaxvs.models.BiasFreeRegression` on the experiment arrays.
 
     The study's form on bias-free inputs, `c0 + c1·(T_chassis − b_c) + c2·(v_m − b_v)`, is
     the same function with `c0 = c0' + c1·b_c + c2·b_v`; [`ThermalFamily`][] reports it that
-    way with the biases of its calibration data. Keeping the biases out of the model keeps
-    its structure independent of the data (one compilation for every data set).
+    way with the biases of its calibration data (`biases`, carried for the report only).
+    Keeping the biases out of the prediction keeps its structure independent of the data
+    (one compilation for every data set).
 
     **Fields:** `coef` = `(c0' [°C], c1 [-], c2 [K/rpm])`, or `(c0', c1)` when
-    `use_speed` is false.
+    `use_speed` is false; `biases`, the calibration data's `Biases`.
     """
 
     coef: Float[Array, " k"]
     use_speed: bool = eqx.field(static=True, default=True)
+    biases: Biases = eqx.field(static=True, default=Biases())
 
     def __call__(self, d: Mapping[str, Array]) -> Float[Array, " n"]:
         # the library's regression (biases folded into the intercept, see above)
@@ -104,43 +131,13 @@ class StaticRegression(eqx.Module):
 # ------------------------------------------------------------------------------ effects
 
 
-def _positive(x) -> Positive:
-    """A positive shape parameter as a log-parametrised leaf; a value that underflowed
-    to zero (or went negative) in an earlier calibration restarts from a tiny floor."""
-    x = jnp.asarray(x)
-    return Positive(jnp.log(jnp.maximum(x, 1e-12)))
-
-
 def first_order_lag(
     s: Float[Array, " n"], tau: Float[Array, ""], dt: float, y_init: Float[Array, ""] | None = None
 ) -> Float[Array, " n"]:
-    """First-order lag `τ ẏ + y = s` of a sampled signal.
-
-    Exact discretisation for `s` linear between samples (first-order hold):
-    `y_k = a y_{k−1} + (1 − a) s_{k−1} + (1 − b)(s_k − s_{k−1})`, `a = e^{−dt/τ}`,
-    `b = (τ/dt)(1 − a)` (the ramp response of a first-order system). The state one sample
-    before the first is `y_init` (default: `s₀`, equilibrium), with the input constant over
-    that sample, so `y₀ = a·y_init + (1 − a)·s₀`. For `τ = 0` this is `y = s` exactly; as
-    `τ → 0` it tends to it continuously (`y_k ≈ s_k − (τ/dt)(s_k − s_{k−1})`).
-
-    **Arguments:** `s` [any unit], `tau` [s] (≥ 0), `dt` [s], `y_init` [unit of `s`].
-    **Returns:** `y`, same unit.
-    """
-    pos = tau > 0
-    tau_safe = jnp.where(pos, tau, 1.0)
-    r = dt / tau_safe
-    a = jnp.where(pos, jnp.exp(-r), 0.0)
-    b = jnp.where(pos, -jnp.expm1(-r) / r, 0.0)
-    ds = jnp.diff(s, prepend=s[:1])
-
-    def step(y_prev, x):
-        sk, dsk = x
-        y = a * y_prev + (1.0 - a) * (sk - dsk) + (1.0 - b) * dsk
-        return y, y
-
-    y0 = s[0] if y_init is None else y_init
-    _, y = jax.lax.scan(step, y0, (s, ds))
-    return jnp.where(pos, y, s)
+    """First-order lag `τ ẏ + y = s` of a sampled signal, first-order hold: the library's
+    `jaxvs.models.FirstOrderLag` (`tau` [s] >= 0, the state `y_init` one sample before
+    the first, default `s₀`; `τ = 0` is the identity)."""
+    return models.FirstOrderLag(tau, y_init).predict(s, dt)
 
 
 class Dynamics(AbstractEffect):
@@ -157,13 +154,13 @@ class Dynamics(AbstractEffect):
         return first_order_lag(y, jnp.asarray(self.tau), self.dt, d["y"][0])
 
     def constrained(self):
-        return eqx.tree_at(lambda e: e.tau, self, replace_fn=_positive)
+        return eqx.tree_at(lambda e: e.tau, self, replace_fn=floored_positive)
 
     def extra_dof(self, arrays):
         return 0
 
     def admissible(self, context):
-        tau = _f(self.tau)
+        tau = scalar(self.tau)
         return check(
             (np.isfinite(tau), "non-finite time constant"),
             (tau >= context.record_dt, f"time constant {tau:.3g} s shorter than one sample"),
@@ -175,7 +172,7 @@ class Dynamics(AbstractEffect):
         )
 
     def parameters(self):
-        return {"tau_s": _f(self.tau)}
+        return {"tau_s": scalar(self.tau)}
 
 
 class _MeasuredTemperature(AbstractAdditiveEffect):
@@ -197,7 +194,7 @@ class _MeasuredTemperature(AbstractAdditiveEffect):
         return 0
 
     def admissible(self, context):
-        c = _f(self.size[0])
+        c = scalar(self.size[0])
         return check(
             (np.isfinite(c), "non-finite coefficient"),
             (
@@ -214,7 +211,7 @@ class _MeasuredTemperature(AbstractAdditiveEffect):
         )
 
     def parameters(self):
-        return {f"c_{self.suffix}": _f(self.size[0]), f"bias_{self.suffix}": _f(self.bias)}
+        return {f"c_{self.suffix}": scalar(self.size[0]), f"bias_{self.suffix}": scalar(self.bias)}
 
 
 class AmbientTemperature(_MeasuredTemperature):
@@ -280,7 +277,7 @@ class SpeedNonlinearity(AbstractAdditiveEffect):
         """Friction heat never falls with speed: with the nominal linear term, the speed
         law `c1·x + c2·x² + c3·x³` (`x = |v|/v_max`) is non-decreasing on [0, 1]."""
         c2, c3 = (float(c) for c in np.asarray(self.size))
-        c1 = float(context.nominal.get("c_speed", 0.0)) * _f(self.scale)
+        c1 = float(context.nominal.get("c_speed", 0.0)) * scalar(self.scale)
         x = np.linspace(0.0, 1.0, 101)
         slope = c1 + 2 * c2 * x + 3 * c3 * x**2
         tol = 1e-9 * (abs(c1) + abs(c2) + abs(c3))
@@ -295,7 +292,7 @@ class SpeedNonlinearity(AbstractAdditiveEffect):
             "c2": c2,
             "c3": c3,
             "alpha_equivalent": equivalent_exponent(c2, c3),
-            "v_max": _f(self.scale),
+            "v_max": scalar(self.scale),
         }
 
 
@@ -487,16 +484,16 @@ class ThermalFamily(AbstractFamily):
         if use_speed and float(np.ptp(v)) <= 0:
             use_speed = False
         # the study's biases: each input's minimum over the calibration data (eq. 2-3)
-        self._bias = {"T_chassis": float(tc.min()), "v_m": float(v.min()) if use_speed else 0.0}
-        cols = [np.ones(tc.size), tc - self._bias["T_chassis"]]
+        bias = _biases(experiments, use_speed)
+        cols = [np.ones(tc.size), tc - bias.T_chassis]
         if use_speed:
-            cols.append(v - self._bias["v_m"])
+            cols.append(v - bias.v_m)
         phi = np.stack(cols, -1)
         y = np.concatenate([e.y for e in experiments])
         th, *_ = np.linalg.lstsq(phi, y, rcond=None)
         # fold the biases into the intercept (see StaticRegression)
-        th[0] -= th[1] * self._bias["T_chassis"] + (th[2] * self._bias["v_m"] if use_speed else 0.0)
-        return StaticRegression(jnp.asarray(th), use_speed)
+        th[0] -= th[1] * bias.T_chassis + (th[2] * bias.v_m if use_speed else 0.0)
+        return StaticRegression(jnp.asarray(th), use_speed, bias)
 
     def identifiability(self, experiments: Sequence[Experiment], model: GapModel) -> str | None:
         """The regression is identified when its regressors are not collinear (the
@@ -558,17 +555,18 @@ class ThermalFamily(AbstractFamily):
 
     def nominal_parameters(self, model) -> dict[str, float]:
         """The regression in the study's bias-free form: `c0`, `c_chassis`, `c_speed` and
-        the biases `bias_chassis` [°C], `bias_speed` [rpm] of the calibration data."""
-        p = unwrap(model.nominal).parameters()
-        bias = getattr(self, "_bias", {"T_chassis": 0.0, "v_m": 0.0})
-        out = {"c0": p["intercept"] + p["c_chassis"] * bias["T_chassis"]}
+        the biases `bias_chassis` [°C], `bias_speed` [rpm] of the calibration data (the
+        ones the nominal model was started on, which it carries)."""
+        nominal = unwrap(model.nominal)
+        p, bias = nominal.parameters(), nominal.biases
+        out = {"c0": p["intercept"] + p["c_chassis"] * bias.T_chassis}
         out["c_chassis"] = p["c_chassis"]
         if "c_speed" in p:
-            out["c0"] += p["c_speed"] * bias["v_m"]
+            out["c0"] += p["c_speed"] * bias.v_m
             out["c_speed"] = p["c_speed"]
-        out["bias_chassis"] = bias["T_chassis"]
+        out["bias_chassis"] = bias.T_chassis
         if "c_speed" in p:
-            out["bias_speed"] = bias["v_m"]
+            out["bias_speed"] = bias.v_m
         return out
 
     def library(self) -> list[EffectSpec]:

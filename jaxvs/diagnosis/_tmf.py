@@ -47,7 +47,7 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, Float
 
-from ..calibration import Positive, fit_rational, fixed, unwrap
+from ..calibration import fit_rational, fixed, unwrap
 from ..data import Record
 from ..models import RationalTF, StableTMF, partial_fractions, section_poles, simulate_modal
 from ..signal import find_period, period_noise, transmissibility
@@ -65,25 +65,16 @@ from ._base import (
     delay_rules,
     exact_zero_at,
     fft_delay,
+    floored_positive as _positive,
     predict,
+    scalar as _f,
 )
 from ._stats import quantisation_step
 
 __all__ = ["StableTMF", "TMFFamily"]
 
 
-def _f(x) -> float:
-    return float(np.asarray(x).reshape(-1)[0])
-
-
 # ------------------------------------------------------------------------------ effects
-
-
-def _positive(x) -> Positive:
-    """A positive shape parameter as a log-parametrised leaf; a value that underflowed
-    to zero (or went negative) in an earlier calibration restarts from a tiny floor."""
-    x = jnp.asarray(x)
-    return Positive(jnp.log(jnp.maximum(x, 1e-12)))
 
 
 def _position_layout(n_size: int) -> tuple[int, int, int]:

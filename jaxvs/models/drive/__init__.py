@@ -1,4 +1,5 @@
 """CNC axis-drive components: friction laws, axis mechanics (rigid, two-mass, ball screw),
+the rigid axis's inverse dynamics (force from motion, IDIM),
 cascaded P/PI loops, actuators, the `DriveAxis` cascade, two-axis contouring, and the
 three-axis Cartesian machine with its 21 geometric errors."""
 
@@ -57,6 +58,7 @@ from ._geometric_errors import (
     MachineErrors as MachineErrors,
     legendre as legendre,
 )
+from ._inverse_dynamics import RigidInverseDynamics as RigidInverseDynamics
 from ._volumetric_tests import (
     AbstractMachineTest as AbstractMachineTest,
     AngularLine as AngularLine,

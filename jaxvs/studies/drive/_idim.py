@@ -10,7 +10,8 @@ so it is identified by ordinary least squares once q̇, q̈ are estimated from t
 position. The recipe is the description's §3.1-3.3:
 
 1. zero-phase (forward-backward) low-pass Butterworth filter of the position `q`;
-2. q̇, q̈ by central differences of the filtered position;
+2. q̇, q̈ by central differences of the filtered position (steps 1-2 are the package's
+   drive preprocessing, `jaxvs.signal.DriveBand`, without hold compensation of the force);
 3. "parallel decimation": every column of the observation matrix and the measured force are
    low-pass filtered by the same zero-phase decimation filter and down-sampled by `nd`
    (removes the torque ripple the controller rejects, eq. (9));
@@ -34,6 +35,7 @@ import scipy.signal as ss
 from jaxtyping import Array, Float
 
 from ...data import Record
+from ...signal import DriveBand
 
 FRICTION_MODELS = ("coulomb_viscous", "asymmetric")
 _PARAMETER_NAMES = {
@@ -210,14 +212,13 @@ def idim_regressor(
             f"needs at least {min_length}. Use a longer record or a smaller decimation."
         )
 
-    # 1. zero-phase Butterworth low-pass of the position (description §3.1).
-    b, a = ss.butter(filter_order, cutoff_hz / (fs / 2))
-    q_f = ss.filtfilt(b, a, q)
-    # 2. central differences, O(dt²): q̇_k = (q_{k+1} − q_{k−1})/2dt,
-    #    q̈_k = (q_{k+1} − 2q_k + q_{k−1})/dt²; the two end samples have no centred
-    #    neighbours and are dropped.
-    dq = (q_f[2:] - q_f[:-2]) / (2 * dt)
-    ddq = (q_f[2:] - 2 * q_f[1:-1] + q_f[:-2]) / dt**2
+    # 1.-2. the package's drive band (description §3.1): zero-phase Butterworth low-pass of
+    #    the position, velocity and acceleration by central differences; the force is
+    #    the measured one (no hold compensation), decimated in step 3 with the regressor.
+    band = DriveBand(fs, cutoff_hz, int(filter_order), decimation=1, hold=False)
+    dq, ddq = band.derivatives(band.lowpass(q))
+    # the two end samples have no centred neighbours and are dropped
+    dq, ddq = dq[1:-1], ddq[1:-1]
     u = u[1:-1]
     t = record.t[1:-1]
     # Drop the filter's edge transients (heuristic length, see `idim_ls`).
@@ -301,8 +302,8 @@ def idim_ls(
     the module docstring) by ordinary least squares after zero-phase Butterworth filtering
     of the position, central differences and parallel decimation.
 
-    On the EMPS estimation set the defaults give M = 95.07 kg, Fv = 203.3 N·s/m,
-    Fc = 20.41 N, offset = −3.17 N and a 4.02 % relative error (published: 95.11, 203.50,
+    On the EMPS estimation set the defaults give M = 95.12 kg, Fv = 203.4 N·s/m,
+    Fc = 20.41 N, offset = −3.17 N and a 4.03 % relative error (published: 95.11, 203.50,
     20.39, −3.16, 4.08 %); see `benchmarks/results/emps.md`.
 
     **Arguments:**
