@@ -256,15 +256,9 @@ def _fit_batch(
     state = _chunked(lambda t, d: _lm.lm_init(evaluate, t, d, rtol, _MU0), theta0, data)
     # An infeasible initial guess is reported, not iterated.
     state = eqx.tree_at(lambda st: st.converged, state, state.converged | bad_init)
-    state = batched_while(
-        lambda st, d: _lm.lm_running(st, max_steps),
-        lambda st, d: _lm.lm_step(evaluate, feasible, st, d, rtol),
-        state,
-        data,
-        block=_BLOCK,
-        first_steps=_LM_FIRST,
-        tail_block=_TAIL_BLOCK,
-        block_steps=_BLOCK_STEPS,
+    schedule = _lm.BatchSchedule(_BLOCK, _LM_FIRST, _TAIL_BLOCK, _BLOCK_STEPS)
+    state = _lm.lm_solve_family(
+        evaluate, state, data, max_steps=max_steps, rtol=rtol, schedule=schedule, feasible=feasible
     )
 
     def summarise(st, d, flip, c_free, bad):

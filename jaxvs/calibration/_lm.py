@@ -465,7 +465,7 @@ def lm_solve(
 
 def lm_solve_family(
     evaluate: Callable,
-    theta0: Float[Array, "member p"],
+    theta0: Float[Array, "member p"] | LMState,
     args: Any,
     *,
     max_steps: int,
@@ -473,15 +473,16 @@ def lm_solve_family(
     schedule: BatchSchedule = BatchSchedule(),
     damping: AbstractDamping = NielsenDamping(),
     feasible: Callable | None = None,
+    mu0: float = 1e-3,
     monitor: AbstractLMMonitor | None = None,
 ) -> LMState | tuple[LMState, PyTree]:
     """[`lm_solve`][] for a family of problems of one shape, with the work compaction of
-    [`batched_while`][] (`schedule`). `theta0` and the leaves of `args` carry the family
-    axis first; the results do too, each member's equal to its own [`lm_solve`][] (a
-    family of one runs exactly that)."""
+    [`batched_while`][] (`schedule`). `theta0` (flat parameters or an [`LMState`][] to go
+    on from) and the leaves of `args` carry the family axis first; the results do too,
+    each member's equal to its own [`lm_solve`][] (a family of one runs exactly that)."""
     cond, body = _lm_loop(evaluate, feasible, rtol, damping, None, monitor, max_steps)
-    carry = jax.vmap(lambda t, a: _lm_start(evaluate, t, a, rtol, 1e-3, monitor))(theta0, args)
-    if theta0.shape[0] == 1:
+    carry = jax.vmap(lambda t, a: _lm_start(evaluate, t, a, rtol, mu0, monitor))(theta0, args)
+    if jax.tree_util.tree_leaves(theta0)[0].shape[0] == 1:
         one = lambda x: x[0]
         a0 = jax.tree_util.tree_map(one, args)
         final = jax.lax.while_loop(
