@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float, Shaped
 
-from .._base import AbstractLinearModel, map_batch
+from .._base import AbstractLinearModel, check_model, map_batch
 from .._realisation import ModalRealisation
 from ._modal import ModalModel
 from ._rational import RationalTF
@@ -33,14 +33,6 @@ _RESIDUE_KINDS = ("complex", "real")
 # ---------------------------------------------------------------------------------------
 # Shared checks and 2x2-block algebra
 # ---------------------------------------------------------------------------------------
-
-
-def check_model(model, who: str) -> None:
-    if not isinstance(model, AbstractLinearModel):
-        raise TypeError(
-            f"{who}: expected a jaxvs linear model (RationalTF, ModalModel, StateSpace, ...), "
-            f"got {type(model).__name__}."
-        )
 
 
 def check_siso(model: AbstractLinearModel, who: str) -> None:

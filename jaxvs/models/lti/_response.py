@@ -7,7 +7,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Complex
 
 from ..._misc import real_array
-from .._base import AbstractLinearModel, map_batch
+from .._base import AbstractLinearModel, check_model, map_batch
 
 
 def as_omega(omega: ArrayLike, where: str) -> Array:
@@ -40,10 +40,7 @@ def frequency_response(
     `(*batch, freq)` for a SISO model (as `scipy.signal.freqs`), otherwise
     `(*batch, freq, out, in)`.
     """
-    if not isinstance(model, AbstractLinearModel):
-        raise TypeError(
-            f"frequency_response: expected a jaxvs linear model, got {type(model).__name__}."
-        )
+    check_model(model, "frequency_response")
     omega = as_omega(omega, "frequency_response")
     if not isinstance(omega, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(omega))):
         raise ValueError("frequency_response: omega contains NaN or inf.")
