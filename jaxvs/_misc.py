@@ -23,11 +23,14 @@ __all__ = [
     "check_physical",
     "concrete",
     "expm",
+    "first_not_increasing",
+    "input_columns",
     "is_traced",
     "json_safe",
     "legendre",
     "options_object",
     "polymul",
+    "real_array",
     "timed_call",
 ]
 
@@ -48,14 +51,42 @@ def as_real(x: Any, what: str) -> Array:
             f"{what} must be real numbers; got {np.asarray(x).dtype} values. Convert them "
             "with np.asarray(..., dtype=float)."
         )
+    return real_array(
+        x, f"{what} must be real; got a complex array (take .real or abs() explicitly)."
+    )
+
+
+def real_array(x: Any, complex_error: str) -> Array:
+    """`x` as a JAX array of a real floating dtype (integers promoted to the default float).
+
+    **Raises:** `TypeError(complex_error)` for complex input; the caller's message names the
+    argument and the fix."""
     x = jnp.asarray(x)
     if jnp.iscomplexobj(x):
-        raise TypeError(
-            f"{what} must be real; got a complex array (take .real or abs() explicitly)."
-        )
+        raise TypeError(complex_error)
     if not jnp.issubdtype(x.dtype, jnp.floating):
         x = x.astype(jnp.result_type(float))
     return x
+
+
+def first_not_increasing(x: np.ndarray) -> int | None:
+    """The index `k` of the first sample with `x[k] <= x[k - 1]` in a 1-D grid (time or
+    frequency), `None` when `x` is strictly increasing; the caller's error names both."""
+    not_increasing = np.diff(x) <= 0
+    return int(np.argmax(not_increasing)) + 1 if not_increasing.any() else None
+
+
+def input_columns(u: Any, n_inputs: int, where: str) -> Any:
+    """The inputs `u` (a NumPy or JAX array) as columns `(time, n_inputs)`: one 1-D input is
+    made a column; any other shape is refused with a `ValueError` naming `where`."""
+    if u.ndim == 1 and n_inputs == 1:
+        u = u[:, None]
+    if u.ndim != 2 or u.shape[1] != n_inputs:
+        raise ValueError(
+            f"{where}: inputs must have shape (time, {n_inputs}) (one column per input); "
+            f"got {u.shape}."
+        )
+    return u
 
 
 def concrete(x: Any) -> np.ndarray | None:

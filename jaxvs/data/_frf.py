@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from .._misc import check_finite, is_traced
+from .._misc import check_finite, first_not_increasing, is_traced, real_array
 
 # What an FRF relates (Ewins, *Modal Testing*, 2000, ch. 1): response per force as
 # displacement (receptance), velocity (mobility) or acceleration (accelerance); a response
@@ -108,11 +108,9 @@ class FRFData(eqx.Module):
         metadata: Mapping[str, Any] | None = None,
         io_shape: tuple[int, ...] | None = None,
     ):
-        frequency = jnp.asarray(frequency)
-        if jnp.iscomplexobj(frequency):
-            raise TypeError("FRFData: frequency must be real [Hz]; got a complex array.")
-        if not jnp.issubdtype(frequency.dtype, jnp.floating):
-            frequency = frequency.astype(jnp.result_type(float))
+        frequency = real_array(
+            frequency, "FRFData: frequency must be real [Hz]; got a complex array."
+        )
         if frequency.ndim != 1 or frequency.shape[0] < 1:
             raise ValueError(
                 f"FRFData: frequency must be a non-empty 1-D grid (freq,) in Hz; got shape "
@@ -324,9 +322,8 @@ def _check_grid(frequency: Array) -> Array:
             f"FRFData: frequency {f[np.argmax(f < 0)]} Hz is negative; store the one-sided "
             "response of the real system (f >= 0)."
         )
-    steps = np.diff(f)
-    if np.any(steps <= 0):
-        k = int(np.argmax(steps <= 0)) + 1
+    k = first_not_increasing(f)
+    if k is not None:
         raise ValueError(
             f"FRFData: frequency is not strictly increasing: f[{k}] = {float(f[k])!r} Hz <= "
             f"f[{k - 1}] = {float(f[k - 1])!r} Hz. Sort the grid (and H with it) and drop "

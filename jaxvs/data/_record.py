@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from jaxtyping import Float
 
+from .._misc import first_not_increasing
 from ._units import ORIGINAL_UNITS_KEY, convert_units, parse_unit, to_si
 
 # Heuristic: a measured time vector is accepted as uniform when every sample lies within
@@ -144,11 +145,9 @@ def _uniform_time_base(t: Any, n: int, rtol: float) -> tuple[float, float]:
             f"The time vector has a non-finite value at sample {index}; remove that sample "
             "(from the signals too), or pass dt=... instead of t when the sampling is uniform."
         )
-    steps = np.diff(time)
-    not_increasing = steps <= 0
-    if not_increasing.any():
-        index = int(np.argmax(not_increasing)) + 1
-        _explain_time_defect(time, steps, index)
+    index = first_not_increasing(time)
+    if index is not None:
+        _explain_time_defect(time, np.diff(time), index)
         raise ValueError(
             f"The time vector is not strictly increasing: t[{index}] = {float(time[index])!r} <= "
             f"t[{index - 1}] = {float(time[index - 1])!r}. Sort the samples by time and drop "
@@ -333,10 +332,23 @@ class Record:
                     raise TypeError(f"The unit of {name!r} must be a string, got {unit!r}.")
                 unit_map[name] = unit
 
+        self._store(data, t0, dt, n, unit_map, _freeze_metadata(metadata))
+
+    def _store(
+        self,
+        data: dict[str, np.ndarray],
+        t0: float,
+        dt: float,
+        n: int,
+        units: dict[str, str],
+        metadata: Mapping[str, Any],
+    ) -> None:
+        """Set the validated contents of a new record (frozen: `object.__setattr__`) and its
+        read-only time vector."""
         set_ = object.__setattr__
         set_(self, "_signals", data)
-        set_(self, "_units", unit_map)
-        set_(self, "_metadata", _freeze_metadata(metadata))
+        set_(self, "_units", units)
+        set_(self, "_metadata", metadata)
         set_(self, "_t0", t0)
         set_(self, "_dt", dt)
         set_(self, "_n", n)
@@ -356,16 +368,8 @@ class Record:
         """Build a record from arrays that are already validated and read-only."""
         record = object.__new__(cls)
         n = next(iter(data.values())).shape[0]
-        set_ = object.__setattr__
-        set_(record, "_signals", data)
-        set_(record, "_units", {k: v for k, v in units.items() if k in data})
-        set_(record, "_metadata", metadata)
-        set_(record, "_t0", float(t0))
-        set_(record, "_dt", float(dt))
-        set_(record, "_n", n)
-        time = t0 + dt * np.arange(n, dtype=np.float64)
-        time.setflags(write=False)
-        set_(record, "_time", time)
+        kept = {k: v for k, v in units.items() if k in data}
+        record._store(data, float(t0), float(dt), n, kept, metadata)
         return record
 
     def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:

@@ -163,19 +163,17 @@ def _is_rpm(unit: Any) -> bool:
     )
 
 
-def _angle_kind(unit: Any) -> str | None:
-    """`"angle"` or `"angular_velocity"`/`"angular_acceleration"` for radian-based units."""
+# The SI unit of an angle, an angular velocity and an angular acceleration, by the
+# dimensionality of the radian-based unit (a radian is dimensionless).
+_ANGLE_SI = {"dimensionless": "rad", "1 / [time]": "rad/s", "1 / [time] ** 2": "rad/s^2"}
+
+
+def _angle_si(unit: Any) -> str | None:
+    """`"rad"`, `"rad/s"` or `"rad/s^2"` for an angle-based unit, else `None`."""
     names = str(unit)
     if not any(key in names for key in _ANGLE_UNITS) and "revolution" not in names:
         return None
-    dimensionality = str(unit.dimensionality)
-    if dimensionality == "dimensionless":
-        return "angle"
-    if dimensionality == "1 / [time]":
-        return "angular_velocity"
-    if dimensionality == "1 / [time] ** 2":
-        return "angular_acceleration"
-    return None
+    return _ANGLE_SI.get(str(unit.dimensionality))
 
 
 def si_unit(text: str, *, name: str = "", source: str = "") -> str:
@@ -189,13 +187,9 @@ def _target(unit: Any, text: str) -> str:
         return ""
     if _is_rpm(unit):
         return "rpm"
-    kind = _angle_kind(unit)
-    if kind == "angle":
-        return "rad"
-    if kind == "angular_velocity":
-        return "rad/s"
-    if kind == "angular_acceleration":
-        return "rad/s^2"
+    angle = _angle_si(unit)
+    if angle is not None:
+        return angle
     if unit.dimensionless:
         # percent, ppm, ...: kept as written (a ratio has no SI unit to go to).
         return text.strip()

@@ -138,6 +138,15 @@ class AbstractLinearModel(AbstractModel):
         return simulate(self, u, dt)
 
 
+def check_model(model: Any, who: str) -> None:
+    """Refuse anything but a jaxvs linear model with a `TypeError` naming `who`."""
+    if not isinstance(model, AbstractLinearModel):
+        raise TypeError(
+            f"{who}: expected a jaxvs linear model (RationalTF, ModalModel, StateSpace, ...), "
+            f"got {type(model).__name__}."
+        )
+
+
 class AbstractFamilyLaw(eqx.Module):
     """How a linear model varies with the position of another axis (a TMF family)."""
 

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from ._base import AbstractLinearModel, map_batch
+from ._base import AbstractLinearModel, check_model, map_batch
 from ._realisation import ModalRealisation
 
 METHODS: tuple[str, ...] = ("zoh", "tustin", "euler", "heun")
@@ -261,8 +261,7 @@ def discretise(
 
     A [`DiscreteModalRealisation`][] whose arrays carry the model's batch axes.
     """
-    if not isinstance(model, AbstractLinearModel):
-        raise TypeError(f"discretise: expected a jaxvs linear model, got {type(model).__name__}.")
+    check_model(model, "discretise")
     _check_method(method, "discretise")
     dt_arr = _check_dt(dt, "discretise")
     out = map_batch(lambda m: discretise_realisation(m.modal_realisation(), dt_arr, method), model)

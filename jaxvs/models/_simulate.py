@@ -33,7 +33,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._misc import check_finite, concrete
-from ._base import AbstractLinearModel, map_batch
+from ._base import AbstractLinearModel, check_model, map_batch
 from ._discretise import (
     METHODS,
     DiscreteModalRealisation,
@@ -487,8 +487,7 @@ def simulate(
 def _checked(model, u, dt, method, x0, who):
     """Validate the arguments of `simulate` / `simulate_metrics`; return the flattened
     input, `dt`, `x0`, the batch shape and whether the input has lanes."""
-    if not isinstance(model, AbstractLinearModel):
-        raise TypeError(f"{who}: expected a jaxvs linear model, got {type(model).__name__}.")
+    check_model(model, who)
     _check_method(method, who)
     u = jnp.asarray(u)
     cdt = _float_dtype(u, who)

@@ -33,6 +33,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from .._misc import as_real
+from ._filter import _positive_finite
 
 __all__ = ["CWTDamping", "cwt_damping", "cwt_morlet", "cwt_ridge", "morlet_scales"]
 
@@ -62,16 +63,6 @@ def _as_record(x: ArrayLike, where: str) -> Array:
             f"{where}: x must be (*batch, time) with at least 8 samples; got shape {x.shape}."
         )
     return x
-
-
-def _check_dt(dt, where: str) -> float:
-    try:
-        dt = float(dt)
-    except TypeError:
-        raise TypeError(f"{where}: dt must be a Python float [s].") from None
-    if not (math.isfinite(dt) and dt > 0):
-        raise ValueError(f"{where}: dt must be a positive sample time [s]; got {dt}.")
-    return dt
 
 
 def _as_frequencies(frequencies: ArrayLike, dt: float, where: str) -> Array:
@@ -125,7 +116,7 @@ def cwt_morlet(
     """
     where = "cwt_morlet"
     x = _as_record(x, where)
-    dt = _check_dt(dt, where)
+    dt = _positive_finite(dt, f"{where}: dt", "sample time", " [s]")
     omega0 = _check_omega0(omega0, where)
     f = _as_frequencies(frequencies, dt, where)
     return _cwt(x, f, dt, omega0)
@@ -263,7 +254,7 @@ def cwt_damping(
     x = _as_record(x, where)
     if x.ndim != 1:
         raise ValueError(f"{where}: x must be 1-D (time,); vmap over several records.")
-    dt = _check_dt(dt, where)
+    dt = _positive_finite(dt, f"{where}: dt", "sample time", " [s]")
     try:
         f_lo, f_hi = (float(b) for b in band)
     except (TypeError, ValueError):

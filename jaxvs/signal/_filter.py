@@ -25,7 +25,7 @@ import numpy as np
 import scipy.signal as ss
 from jaxtyping import Array, ArrayLike, Float
 
-from .._misc import check_finite
+from .._misc import check_finite, real_array
 
 # ---------------------------------------------------------------------------------------
 # Validation helpers (shared with _differentiate.py)
@@ -33,14 +33,11 @@ from .._misc import check_finite
 
 
 def _as_real_signal(x, fn: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(
-            f"{fn}: x must be a real signal; got a complex array. Filter the real and "
-            "imaginary parts separately."
-        )
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
+    x = real_array(
+        x,
+        f"{fn}: x must be a real signal; got a complex array. Filter the real and "
+        "imaginary parts separately.",
+    )
     if x.ndim < 1:
         raise ValueError(f"{fn}: x must be a signal of shape (*batch, time); got a scalar.")
     return x
@@ -75,12 +72,18 @@ def _positive_float(value, name: str, fn: str) -> float:
             "host with scipy.signal); do not pass it as a traced jit argument — close over "
             "it or mark it static."
         )
+    return _positive_finite(value, f"{fn}: {name}")
+
+
+def _positive_finite(value, what: str, kind: str = "number", unit: str = "") -> float:
+    """`value` as a positive finite float; errors name `what`, e.g. "resample: dt", as a
+    `kind` ("period") in `unit` (" [s]")."""
     try:
         value = float(value)
     except (TypeError, ValueError):
-        raise TypeError(f"{fn}: {name} must be a number, got {value!r}.") from None
+        raise TypeError(f"{what} must be a number{unit}, got {value!r}.") from None
     if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{fn}: {name} must be a positive finite number, got {value!r}.")
+        raise ValueError(f"{what} must be a positive finite {kind}{unit}, got {value!r}.")
     return value
 
 

@@ -14,7 +14,8 @@ import numpy as np
 import scipy.interpolate as si
 from jaxtyping import ArrayLike, Float
 
-from .._misc import check_finite
+from .._misc import check_finite, first_not_increasing
+from ._filter import _positive_finite
 
 _METHODS = ("linear", "cubic", "previous")
 # Heuristic: grid points within 1e-9·dt of the last sample are kept (round-off in
@@ -49,12 +50,7 @@ def _uniform_grid(time: np.ndarray, dt) -> np.ndarray:
     if dt is None:
         dt = float(np.median(np.diff(time)))
     else:
-        try:
-            dt = float(dt)
-        except (TypeError, ValueError):
-            raise TypeError(f"resample: dt must be a number [s], got {dt!r}.") from None
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"resample: dt must be a positive finite period [s], got {dt!r}.")
+        dt = _positive_finite(dt, "resample: dt", "period", " [s]")
     n = int(math.floor((time[-1] - time[0]) / dt * (1 + _GRID_RTOL) + _GRID_RTOL)) + 1
     return time[0] + dt * np.arange(n)
 
@@ -144,9 +140,8 @@ def resample(
             f"axis {axis}; pass the time axis of x with axis=..."
         )
     _check_finite(time, "t")
-    not_increasing = np.diff(time) <= 0
-    if not_increasing.any():
-        index = int(np.argmax(not_increasing)) + 1
+    index = first_not_increasing(time)
+    if index is not None:
         raise ValueError(
             f"resample: t is not strictly increasing: t[{index}] = {time[index]!r} <= "
             f"t[{index - 1}] = {time[index - 1]!r}. Sort by time (order = np.argsort(t, "

@@ -22,7 +22,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
 from .._custom_types import RealScalarLike
-from .._misc import check_finite, is_traced, options_object
+from .._misc import check_finite, is_traced, options_object, real_array
 from ..data import FRFData
 from ._windows import _ALIASES, _check_fs, get_window
 
@@ -76,14 +76,11 @@ def _sampling_rate(fs, fn: str) -> float:
 
 
 def _as_signal(x, name: str, fn: str) -> Array:
-    x = jnp.asarray(x)
-    if jnp.iscomplexobj(x):
-        raise TypeError(
-            f"{fn}: {name} must be a real time record; got a complex array. Estimate the "
-            "real and imaginary parts separately or use a two-sided analysis elsewhere."
-        )
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
+    x = real_array(
+        x,
+        f"{fn}: {name} must be a real time record; got a complex array. Estimate the "
+        "real and imaginary parts separately or use a two-sided analysis elsewhere.",
+    )
     if x.ndim < 1:
         raise ValueError(
             f"{fn}: {name} must be a time record of shape (*batch, time); got a scalar."
@@ -639,9 +636,7 @@ def _n_averages(seg: _Segments) -> int:
     return seg.n_segments * records
 
 
-def _frf(
-    estimator, x, y, fs, *, welch, input_unit, output_unit, kind, fn
-) -> FRFData:
+def _frf(estimator, x, y, fs, *, welch, input_unit, output_unit, kind, fn) -> FRFData:
     r = _ratio_inputs(fn, x, y, fs, welch, ("x", "y"))
     h, gamma2 = _ratio_core(r.x, r.y, r.wx, r.wy, r.seg, r.detrend, estimator, 0, False)
     return FRFData(

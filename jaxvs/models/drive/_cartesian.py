@@ -46,7 +46,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ..._misc import as_real, concrete, is_traced
-from .._base import AbstractModel, check_parameters
+from .._base import AbstractModel
 from ._drive import DriveAxis
 from ._geometric_errors import MachineErrors
 
@@ -165,9 +165,6 @@ class CartesianMachine(AbstractModel):
         self.tool_offset = t
         self.reversal = b
 
-    def __check_init__(self):
-        check_parameters(self)
-
     # ------------------------------------------------------------------ geometry
     @property
     def chain(self) -> tuple[int, int, int]:
@@ -208,9 +205,7 @@ class CartesianMachine(AbstractModel):
         q = jnp.asarray(q)
         return sum(self.errors.axis_motion(q[..., j], j)[1] for j in range(3))
 
-    def volumetric_error(
-        self, x: ArrayLike, y: ArrayLike, z: ArrayLike
-    ) -> Float[Array, "... 3"]:
+    def volumetric_error(self, x: ArrayLike, y: ArrayLike, z: ArrayLike) -> Float[Array, "... 3"]:
         r"""Volumetric error `E = P(q) − (q + t)` [m] at commanded positions (x, y, z) [m],
         broadcast against each other (a `50×50×50` grid from `jnp.meshgrid` is one call);
         returns `(..., 3)`.
@@ -295,4 +290,3 @@ def _simulate(machine: CartesianMachine, r, dt):
         tool=tool,
         error=tool - r - machine.tool_offset,
     )
-

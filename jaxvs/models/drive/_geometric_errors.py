@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..._misc import as_real, concrete
+from ..._misc import as_real, concrete, legendre as _legendre
 from .._base import check_parameters
 
 __all__ = [
@@ -70,10 +70,8 @@ _MAX_TRAVEL = 20.0
 def legendre(u: ArrayLike, degree: int) -> Float[Array, "... degree+1"]:
     """Legendre polynomials `P_0 … P_degree` at `u` (Bonnet's recurrence), stacked last."""
     u = jnp.asarray(u)
-    out = [jnp.ones_like(u), u]
-    for k in range(1, degree):
-        out.append(((2 * k + 1) * u * out[k] - k * out[k - 1]) / (k + 1))
-    return jnp.stack(out[: degree + 1], axis=-1)
+    ones = jnp.ones_like(u)[..., None]
+    return jnp.concatenate([ones, _legendre(u, max(degree, 1))], axis=-1)[..., : degree + 1]
 
 
 def _kind(name: str) -> tuple[str, int]:

@@ -26,6 +26,7 @@ from .._base import AbstractLinearModel, check_batch, map_batch
 from .._realisation import ModalRealisation
 from ._modal import ModalModel
 from ._rational import RationalTF
+from ._response import as_omega
 from ._statespace import StateSpace
 
 _QUANTITY_POWER = {"displacement": 0, "velocity": 1, "acceleration": 2}
@@ -91,20 +92,6 @@ def _quantity_power(quantity: str, where: str) -> int:
     if quantity not in _QUANTITY_POWER:
         raise ValueError(f"{where}: quantity={quantity!r} is not one of {tuple(_QUANTITY_POWER)}.")
     return _QUANTITY_POWER[quantity]
-
-
-def _as_omega(omega: ArrayLike, where: str) -> Array:
-    omega = jnp.asarray(omega)
-    if jnp.iscomplexobj(omega):
-        raise TypeError(f"{where}: omega is the real angular frequency [rad/s]; got complex.")
-    if omega.ndim != 1:
-        raise ValueError(
-            f"{where}: omega must be 1-D (freq,); got shape {omega.shape}. Flatten it, or "
-            "vmap over extra axes."
-        )
-    if not jnp.issubdtype(omega.dtype, jnp.floating):
-        omega = omega.astype(jnp.result_type(float))
-    return omega
 
 
 def _mul_quadratic(p: Array, q: Array) -> Array:
@@ -386,7 +373,7 @@ class OscillatorChain(AbstractLinearModel):
         `response` / `force` is a single int.
         """
         where = "OscillatorChain.frf"
-        omega = _as_omega(omega, where)
+        omega = as_omega(omega, where)
         n = self.n_masses
         resp, r_scalar = _indices(response, n, "response", where)
         frc, f_scalar = _indices(force, n, "force", where)
@@ -423,7 +410,7 @@ class OscillatorChain(AbstractLinearModel):
         Complex `(*batch, freq)`.
         """
         where = "OscillatorChain.tmf"
-        omega = _as_omega(omega, where)
+        omega = as_omega(omega, where)
         n = self.n_masses
         a, b, c = (_index(i, n, nm, where) for i, nm in ((a, "a"), (b, "b"), (c, "c")))
         return _apply(self, "_tmf_one", omega, np.array([a, b, c]))

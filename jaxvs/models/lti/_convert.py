@@ -20,10 +20,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float, Shaped
 
-from .._base import AbstractLinearModel, map_batch
+from .._base import AbstractLinearModel, check_model, map_batch
 from .._realisation import ModalRealisation
 from ._modal import ModalModel
 from ._rational import RationalTF
+from ._response import as_omega
 from ._statespace import StateSpace
 
 _RESIDUE_KINDS = ("complex", "real")
@@ -32,14 +33,6 @@ _RESIDUE_KINDS = ("complex", "real")
 # ---------------------------------------------------------------------------------------
 # Shared checks and 2x2-block algebra
 # ---------------------------------------------------------------------------------------
-
-
-def check_model(model, who: str) -> None:
-    if not isinstance(model, AbstractLinearModel):
-        raise TypeError(
-            f"{who}: expected a jaxvs linear model (RationalTF, ModalModel, StateSpace, ...), "
-            f"got {type(model).__name__}."
-        )
 
 
 def check_siso(model: AbstractLinearModel, who: str) -> None:
@@ -560,11 +553,7 @@ def position_to_acceleration(model: AbstractLinearModel) -> AbstractLinearModel:
 
 def _check_frf(H, omega, axis: int, who: str) -> tuple[Array, Array, int]:
     H = jnp.asarray(H)
-    omega = jnp.asarray(omega)
-    if jnp.iscomplexobj(omega):
-        raise TypeError(f"{who}: omega is the real angular frequency [rad/s].")
-    if omega.ndim != 1:
-        raise ValueError(f"{who}: omega must be 1-D (freq,); got shape {omega.shape}.")
+    omega = as_omega(omega, who)
     if H.ndim == 0:
         raise ValueError(f"{who}: H must have a frequency axis; got a scalar.")
     if not -H.ndim <= axis < H.ndim:
@@ -576,8 +565,6 @@ def _check_frf(H, omega, axis: int, who: str) -> tuple[Array, Array, int]:
             f"{omega.shape[0]}. Pass the frequency axis, e.g. axis=-3 for a (freq, out, in) "
             "FRF from jaxvs.frequency_response."
         )
-    if not jnp.issubdtype(omega.dtype, jnp.floating):
-        omega = omega.astype(jnp.result_type(float))
     if not jnp.issubdtype(H.dtype, jnp.inexact):
         H = H.astype(jnp.result_type(float))
     shape = [1] * H.ndim

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
+from ..._misc import real_array
 from .._base import AbstractFamilyLaw, AbstractLinearModel
 from ._modal import ModalModel
 from ._rational import RationalTF
@@ -196,11 +197,7 @@ class GridFamily(AbstractFamilyLaw):
                 f"GridFamily: extrapolate must be one of {_EXTRAPOLATE}; got {extrapolate!r}."
             )
         _interpolation_form(model)  # raises a TypeError with advice for other families
-        grid = jnp.asarray(grid)
-        if jnp.iscomplexobj(grid):
-            raise TypeError("GridFamily: grid positions are real numbers.")
-        if not jnp.issubdtype(grid.dtype, jnp.floating):
-            grid = grid.astype(jnp.result_type(float))
+        grid = real_array(grid, "GridFamily: grid positions are real numbers.")
         if grid.ndim != 1 or grid.shape[0] < 2:
             raise ValueError(
                 f"GridFamily: grid must be 1-D with at least 2 points; got shape {grid.shape}."

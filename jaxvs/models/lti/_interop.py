@@ -58,17 +58,9 @@ def _members(model: Any) -> list:
         # the frequency grid is shared by the family; index H (and coherence) only
         def rec_frf(H, C, dims):
             if not dims:
-                return FRFData(
-                    model.frequency,
-                    H,
-                    coherence=C,
-                    n_averages=model.n_averages,
-                    input_unit=model.input_unit,
-                    output_unit=model.output_unit,
-                    kind=model.kind,
-                    metadata=dict(model.metadata),
-                    io_shape=model.io_shape,
-                )
+                # the member keeps the family's grid, labels and metadata
+                member = eqx.tree_at(lambda d: d.H, model, H)
+                return member if C is None else eqx.tree_at(lambda d: d.coherence, member, C)
             return [rec_frf(H[i], None if C is None else C[i], dims[1:]) for i in range(dims[0])]
 
         return rec_frf(model.H, model.coherence, shape)

@@ -6,7 +6,22 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex
 
-from .._base import AbstractLinearModel, map_batch
+from ..._misc import real_array
+from .._base import AbstractLinearModel, check_model, map_batch
+
+
+def as_omega(omega: ArrayLike, where: str) -> Array:
+    """`omega` as a real floating 1-D grid `(freq,)` of angular frequencies [rad/s]; a
+    `TypeError` (complex) or `ValueError` (shape) names `where`."""
+    omega = real_array(
+        omega, f"{where}: omega is the real angular frequency [rad/s]; got a complex array."
+    )
+    if omega.ndim != 1:
+        raise ValueError(
+            f"{where}: omega must be 1-D (freq,); got shape {omega.shape}. Flatten it, or "
+            "vmap over extra axes."
+        )
+    return omega
 
 
 def frequency_response(
@@ -25,22 +40,10 @@ def frequency_response(
     `(*batch, freq)` for a SISO model (as `scipy.signal.freqs`), otherwise
     `(*batch, freq, out, in)`.
     """
-    if not isinstance(model, AbstractLinearModel):
-        raise TypeError(
-            f"frequency_response: expected a jaxvs linear model, got {type(model).__name__}."
-        )
-    omega = jnp.asarray(omega)
-    if jnp.iscomplexobj(omega):
-        raise TypeError("frequency_response: omega is the real angular frequency [rad/s].")
-    if omega.ndim != 1:
-        raise ValueError(
-            f"frequency_response: omega must be 1-D (freq,); got shape {omega.shape}. "
-            "Flatten it, or vmap over extra axes."
-        )
+    check_model(model, "frequency_response")
+    omega = as_omega(omega, "frequency_response")
     if not isinstance(omega, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(omega))):
         raise ValueError("frequency_response: omega contains NaN or inf.")
-    if not jnp.issubdtype(omega.dtype, jnp.floating):
-        omega = omega.astype(jnp.result_type(float))
     return _response(model, omega)
 
 

@@ -23,6 +23,7 @@ import jax.random as jr
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
+from ..._misc import input_columns
 from .._base import AbstractModel
 
 __all__ = ["AbstractNetwork", "Perceptron", "StaticNetwork", "TimeDelayNetwork"]
@@ -190,14 +191,7 @@ def _as_inputs(u: ArrayLike, n_inputs: int, where: str) -> Array:
     u = jnp.asarray(u)
     if not jnp.issubdtype(u.dtype, jnp.floating):
         u = u.astype(jnp.result_type(float))
-    if u.ndim == 1 and n_inputs == 1:
-        u = u[:, None]
-    if u.ndim != 2 or u.shape[1] != n_inputs:
-        raise ValueError(
-            f"{where}: inputs must have shape (time, {n_inputs}) (one column per input); "
-            f"got {u.shape}."
-        )
-    return u
+    return input_columns(u, n_inputs, where)
 
 
 def _range_fields(lo, hi, n: int | None, dtype):

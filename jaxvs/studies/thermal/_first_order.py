@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._misc import first_not_increasing
 from ...calibration import lm_solve
 from ...models import FirstOrder, PiecewiseFirstOrder
 
@@ -53,9 +54,8 @@ def _check_series(t: Any, y: Any, where: str, min_samples: int = 4) -> tuple[np.
             f"at index {int(np.argmax(bad))}. Drop them (keep = np.isfinite(y); "
             f"{where}(t[keep], y[keep])) -- the fit does not need a uniform grid."
         )
-    steps = np.diff(t)
-    if np.any(steps <= 0):
-        i = int(np.argmax(steps <= 0)) + 1
+    i = first_not_increasing(t)
+    if i is not None:
         raise ValueError(
             f"{where}: t is not strictly increasing (t[{i}] = {t[i]} <= t[{i - 1}] = "
             f"{t[i - 1]}); sort the samples by time and drop duplicated time stamps."

@@ -33,7 +33,7 @@ import optax
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from ..._misc import timed_call
+from ..._misc import input_columns, timed_call
 from ...calibration import (
     RESULTS,
     AbstractLMMonitor,
@@ -122,13 +122,7 @@ class TrainResult(eqx.Module):
 def _as_xy(u: Any, y: Any, n_inputs: int, where: str) -> tuple[Array, Array]:
     u = np.asarray(u, dtype=float)
     y = np.asarray(y, dtype=float)
-    if u.ndim == 1 and n_inputs == 1:
-        u = u[:, None]
-    if u.ndim != 2 or u.shape[1] != n_inputs:
-        raise ValueError(
-            f"{where}: inputs must have shape (time, {n_inputs}), one column per input; got "
-            f"{u.shape}."
-        )
+    u = input_columns(u, n_inputs, where)
     if y.ndim != 1 or y.shape[0] != u.shape[0]:
         raise ValueError(
             f"{where}: the target must be 1-D with one value per input row ({u.shape[0]}); "
