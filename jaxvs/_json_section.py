@@ -8,7 +8,7 @@ from typing import Any
 
 from ._misc import json_safe
 
-__all__ = ["JsonSection", "section_json"]
+__all__ = ["JsonSection", "ReportContent", "section_json"]
 
 
 class JsonSection(Mapping):
@@ -39,6 +39,22 @@ class JsonSection(Mapping):
 
     def __len__(self) -> int:
         return len(self._json())
+
+
+class ReportContent(JsonSection):
+    """A whole report's content: frozen like its sections, but for its `figures`, which
+    whoever draws them sets after the report is built."""
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        """`content["figures"] = names`: the figures drawn after the report was built
+        (compatibility; the other fields are frozen)."""
+        if key != "figures":
+            raise TypeError(
+                f"the report's content is frozen: {key!r} cannot be set; build a new one "
+                "with dataclasses.replace(content, ...) (only 'figures' is set after the "
+                "report is built, by whoever draws them)."
+            )
+        object.__setattr__(self, "figures", None if value is None else list(value))
 
 
 def section_json(value: JsonSection | None) -> dict[str, Any] | None:

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from .._html import markdown_to_html, report_html
-from .._json_section import JsonSection, section_json
+from .._json_section import JsonSection, ReportContent, section_json
 from .._misc import json_safe
 from ._base import Experiment, GapModel
 from ._check import CheckContent
@@ -226,7 +226,7 @@ _UNSEARCHED_ORDER = ("check", "warnings", "family", "gap", "where", "candidates"
 
 
 @dataclasses.dataclass(frozen=True)
-class DiagnosisContent(JsonSection):
+class DiagnosisContent(ReportContent):
     """The content of the diagnosis `report.json`, typed (docs/guides/contracts.md).
 
     `to_json()` writes `report.json` (with `schema_version`): `_json()` is the one place
@@ -327,17 +327,6 @@ class DiagnosisContent(JsonSection):
             discovered=data.get("discovered"),
             figures=None if figures is None else list(figures),
         )
-
-    def __setitem__(self, key: str, value: Any) -> None:
-        """`content["figures"] = names`: the figures drawn after the report was built
-        (compatibility; the other fields are frozen)."""
-        if key != "figures":
-            raise TypeError(
-                f"the report's content is frozen: {key!r} cannot be set; build a new one "
-                "with dataclasses.replace(content, ...) (only 'figures' is set after the "
-                "report is built, by whoever draws them)."
-            )
-        object.__setattr__(self, "figures", None if value is None else list(value))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..._html import markdown_to_html, report_html
 from ..._io import save_model
-from ..._json_section import JsonSection
+from ..._json_section import ReportContent
 from ..._misc import json_safe
 
 __all__ = ["SCHEMA_VERSION", "DesignContent", "DesignReport"]
@@ -47,7 +47,7 @@ def _describe(d: dict) -> str:
 
 
 @dataclasses.dataclass(frozen=True)
-class DesignContent(JsonSection):
+class DesignContent(ReportContent):
     """The content of the design `report.json`, typed (docs/guides/design.md).
 
     `target`, `metric`, `designs` (ranked, best first: rank, structure, inputs, delays,
@@ -149,17 +149,6 @@ class DesignContent(JsonSection):
             timing=dict(data.get("timing") or {}),
             figures=None if figures is None else list(figures),
         )
-
-    def __setitem__(self, key: str, value: Any) -> None:
-        """`content["figures"] = names`: the figures drawn after the report was built
-        (compatibility; the other fields are frozen)."""
-        if key != "figures":
-            raise TypeError(
-                f"the report's content is frozen: {key!r} cannot be set; build a new one "
-                "with dataclasses.replace(content, ...) (only 'figures' is set after the "
-                "report is built, by whoever draws them)."
-            )
-        object.__setattr__(self, "figures", None if value is None else list(value))
 
 
 @dataclasses.dataclass(frozen=True)
