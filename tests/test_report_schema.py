@@ -23,11 +23,10 @@ import pathlib
 import subprocess
 import sys
 
-import numpy as np
 import pytest
+from test_html_reports import drive_record  # the record the html report tests check
 
 import jaxvs
-from jaxvs.data import Record
 from jaxvs.diagnosis._check import CheckReport
 from jaxvs.diagnosis._report import DiagnosisReport, Verdict
 from jaxvs.studies.design._report import DesignReport
@@ -35,21 +34,6 @@ from jaxvs.studies.design._report import DesignReport
 GOLDEN = pathlib.Path(__file__).parent / "data" / "reports"
 KINDS = {"check": CheckReport, "diagnose": DiagnosisReport, "design": DesignReport}
 NAMES = sorted(p.stem for p in GOLDEN.glob("*.json"))
-
-
-def drive_record(*, both_ways=True, n=3000, fs=1000.0, clip=150.0):
-    """A rigid axis with viscous friction and an offset (the record of
-    tests/test_html_reports.py): a clipping warning at 150 N, and, one way at 20 N, a
-    check that blocks."""
-    rng = np.random.default_rng(0)
-    t = np.arange(n) / fs
-    q = 0.01 * np.sin(2 * np.pi * 0.7 * t) + 0.004 * np.sin(2 * np.pi * 3.1 * t + 1.0)
-    if not both_ways:
-        q = 0.2 * t + 0.0005 * np.sin(2 * np.pi * 3.1 * t)
-    v = np.gradient(q, 1 / fs)
-    u = 95.0 * np.gradient(v, 1 / fs) + 200.0 * v - 3.0 + 0.5 * rng.standard_normal(n)
-    u = np.clip(u, -clip, clip)
-    return Record({"q": q, "u": u}, dt=1 / fs, units={"q": "m", "u": "N"})
 
 
 FAST_RUNS = {
