@@ -38,22 +38,19 @@ def _record(t_chassis_start, speed_floor, seed):
 
 def test_thermal_nominal_on_new_data_leaves_the_earlier_result_alone():
     fam = ThermalFamily()
-    first = fam.nominal([fam.prepare(_record(20.0, 500.0, 0), "a")])
-    second = fam.nominal([fam.prepare(_record(24.0, 800.0, 1), "b")])
-    p1 = fam.nominal_parameters(GapModel(first))
-    p2 = fam.nominal_parameters(GapModel(second))
+    exps_a = [fam.prepare(_record(20.0, 500.0, 0), "a")]
+    exps_b = [fam.prepare(_record(24.0, 800.0, 1), "b")]
+    first = fam.nominal(exps_a)
+    second = fam.nominal(exps_b)
+    p1 = fam.nominal_parameters(GapModel(first), exps_a)
+    p2 = fam.nominal_parameters(GapModel(second), exps_b)
     # each result carries the biases (the inputs' minima) of its own data; 1e-6 K: the
     # zero-phase smoothing of the temperature inputs moves the start of the rise by ~1e-8 K
     assert p1["bias_chassis"] == pytest.approx(20.0, abs=1e-6) and p1["bias_speed"] == 500.0
     assert p2["bias_chassis"] == pytest.approx(24.0, abs=1e-6) and p2["bias_speed"] == 800.0
     # and reads the same as from a family that never saw the other data
     fresh = ThermalFamily()
-    assert (
-        fresh.nominal_parameters(
-            GapModel(fresh.nominal([fam.prepare(_record(20.0, 500.0, 0), "a")]))
-        )
-        == p1
-    )
+    assert fresh.nominal_parameters(GapModel(fresh.nominal(exps_a)), exps_a) == p1
     # the study's coefficients, recovered on either record: 0.05 K noise over 2000 samples
     for p in (p1, p2):
         assert p["c_chassis"] == pytest.approx(0.9, abs=0.02)

@@ -440,9 +440,12 @@ class AbstractFamily(abc.ABC):
         derived from the data (e.g. a default cut-off); the report's `data.options`."""
         return dict(self.options)
 
-    def nominal_parameters(self, model: GapModel) -> dict[str, float]:
+    def nominal_parameters(
+        self, model: GapModel, experiments: Sequence[Experiment]
+    ) -> dict[str, float]:
         """The calibrated nominal model's physical parameters, by name (every nominal
-        model states them: `parameters()`)."""
+        model states them: `parameters()`), in the terms of the calibration `experiments`
+        (e.g. the thermal regression's input biases, each input's minimum over them)."""
         return unwrap(model.nominal).parameters()
 
     def describe_nominal(self) -> str:

@@ -59,7 +59,9 @@ def _not_identifiable_report(setup: _Setup, why: str, res, check) -> DiagnosisRe
         warnings=list(check.warnings) if check is not None else [],
         nominal=Nominal(
             model=fam.describe_nominal(),
-            parameters=fam.nominal_parameters(res.nominal) if res is not None else {},
+            parameters=(
+                fam.nominal_parameters(res.nominal, res.calibration) if res is not None else {}
+            ),
         ),
         data=_data_json(setup),
         timing=Timing(seconds=time.perf_counter() - setup.t_start),
@@ -343,7 +345,7 @@ def _report(setup: _Setup, res, checked, *, fdr: float, n_boot: int, seed: int):
         remainder=state["remainder"],
         searched=not res.gated,
         parameters={
-            "nominal": fam.nominal_parameters(res.final),
+            "nominal": fam.nominal_parameters(res.final, res.calibration),
             **{e.name: e.parameters() for e in res.final.effects},
         },
     )
@@ -368,7 +370,8 @@ def _report(setup: _Setup, res, checked, *, fdr: float, n_boot: int, seed: int):
         candidates=_candidates_json(res),
         verdict=verdict,
         nominal=Nominal(
-            model=fam.describe_nominal(), parameters=fam.nominal_parameters(res.nominal)
+            model=fam.describe_nominal(),
+            parameters=fam.nominal_parameters(res.nominal, res.calibration),
         ),
         data=_data_json(setup, res),
         rounds=res.history,

@@ -1145,7 +1145,7 @@ class DriveFamily(AbstractFamily):
             resolution=max(e.resolution for e in experiments),
             duration=dur,
             span=float(np.ptp(q)),
-            nominal={**self.nominal_parameters(model), **coulomb_level(experiments)},
+            nominal={**self.nominal_parameters(model, experiments), **coulomb_level(experiments)},
         )
 
     def null_experiments(

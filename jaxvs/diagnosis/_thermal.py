@@ -67,31 +67,12 @@ __all__ = ["StaticRegression", "ThermalFamily"]
 _INPUTS = ("T_chassis", "v_m", "T_air", "T_water")
 
 
-@dataclasses.dataclass(frozen=True, eq=False)
-class Biases:
-    """The study's input biases (eq. 2-3): each input's minimum over the calibration data,
-    `T_chassis` [°C] and `v_m` [rpm] (0 without the speed term).
-
-    A report-only value of `StaticRegression`: the prediction has them folded into its
-    intercept, so every `Biases` compares equal and hashes alike, and a model carrying the
-    biases of one data set keeps the structure (and the compiled programs) of every
-    other."""
-
-    T_chassis: float = 0.0
-    v_m: float = 0.0
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, Biases)
-
-    def __hash__(self) -> int:
-        return hash(Biases)
-
-
-def _biases(experiments: Sequence[Experiment], use_speed: bool) -> Biases:
-    """The study's biases of the calibration experiments: each input's minimum."""
+def _biases(experiments: Sequence[Experiment], use_speed: bool) -> tuple[float, float]:
+    """The study's input biases (eq. 2-3) of the calibration experiments: each input's
+    minimum, `T_chassis` [°C] and `v_m` [rpm] (0 without the speed term)."""
     tc = min(float(np.min(e.arrays["T_chassis"])) for e in experiments)
     vm = min(float(np.min(e.arrays["v_m"])) for e in experiments) if use_speed else 0.0
-    return Biases(tc, vm)
+    return tc, vm
 
 
 class StaticRegression(eqx.Module):
@@ -101,17 +82,15 @@ class StaticRegression(eqx.Module):
 
     The study's form on bias-free inputs, `c0 + c1·(T_chassis − b_c) + c2·(v_m − b_v)`, is
     the same function with `c0 = c0' + c1·b_c + c2·b_v`; [`ThermalFamily`][] reports it that
-    way with the biases of its calibration data (`biases`, carried for the report only).
-    Keeping the biases out of the prediction keeps its structure independent of the data
-    (one compilation for every data set).
+    way with the biases of its calibration data. Keeping the biases out of the prediction
+    keeps its structure independent of the data (one compilation for every data set).
 
     **Fields:** `coef` = `(c0' [°C], c1 [-], c2 [K/rpm])`, or `(c0', c1)` when
-    `use_speed` is false; `biases`, the calibration data's `Biases`.
+    `use_speed` is false.
     """
 
     coef: Float[Array, " k"]
     use_speed: bool = eqx.field(static=True, default=True)
-    biases: Biases = eqx.field(static=True, default=Biases())
 
     def __call__(self, d: Mapping[str, Array]) -> Float[Array, " n"]:
         # the library's regression (biases folded into the intercept, see above)
@@ -484,16 +463,16 @@ class ThermalFamily(AbstractFamily):
         if use_speed and float(np.ptp(v)) <= 0:
             use_speed = False
         # the study's biases: each input's minimum over the calibration data (eq. 2-3)
-        bias = _biases(experiments, use_speed)
-        cols = [np.ones(tc.size), tc - bias.T_chassis]
+        b_c, b_v = _biases(experiments, use_speed)
+        cols = [np.ones(tc.size), tc - b_c]
         if use_speed:
-            cols.append(v - bias.v_m)
+            cols.append(v - b_v)
         phi = np.stack(cols, -1)
         y = np.concatenate([e.y for e in experiments])
         th, *_ = np.linalg.lstsq(phi, y, rcond=None)
         # fold the biases into the intercept (see StaticRegression)
-        th[0] -= th[1] * bias.T_chassis + (th[2] * bias.v_m if use_speed else 0.0)
-        return StaticRegression(jnp.asarray(th), use_speed, bias)
+        th[0] -= th[1] * b_c + (th[2] * b_v if use_speed else 0.0)
+        return StaticRegression(jnp.asarray(th), use_speed)
 
     def identifiability(self, experiments: Sequence[Experiment], model: GapModel) -> str | None:
         """The regression is identified when its regressors are not collinear (the
@@ -553,20 +532,20 @@ class ThermalFamily(AbstractFamily):
                 out[k].append(dataclasses.replace(exp, arrays={**exp.arrays, "y": ys[k]}))
         return out
 
-    def nominal_parameters(self, model) -> dict[str, float]:
+    def nominal_parameters(self, model, experiments) -> dict[str, float]:
         """The regression in the study's bias-free form: `c0`, `c_chassis`, `c_speed` and
-        the biases `bias_chassis` [°C], `bias_speed` [rpm] of the calibration data (the
-        ones the nominal model was started on, which it carries)."""
-        nominal = unwrap(model.nominal)
-        p, bias = nominal.parameters(), nominal.biases
-        out = {"c0": p["intercept"] + p["c_chassis"] * bias.T_chassis}
+        the biases `bias_chassis` [°C], `bias_speed` [rpm] of the calibration
+        `experiments` (each input's minimum)."""
+        p = unwrap(model.nominal).parameters()
+        b_c, b_v = _biases(experiments, "c_speed" in p)
+        out = {"c0": p["intercept"] + p["c_chassis"] * b_c}
         out["c_chassis"] = p["c_chassis"]
         if "c_speed" in p:
-            out["c0"] += p["c_speed"] * bias.v_m
+            out["c0"] += p["c_speed"] * b_v
             out["c_speed"] = p["c_speed"]
-        out["bias_chassis"] = bias.T_chassis
+        out["bias_chassis"] = b_c
         if "c_speed" in p:
-            out["bias_speed"] = bias.v_m
+            out["bias_speed"] = b_v
         return out
 
     def library(self) -> list[EffectSpec]:
